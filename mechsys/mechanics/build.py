@@ -1,0 +1,495 @@
+"""Turn a validated document into kinematics: link frames, bodies, points, load and constraint elements."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import sympy as sp
+
+from mechsys.mechanics.kinematics import AXES, FrameState, unit
+from mechsys.model.expressions import names_in
+from mechsys.model.load import T, Document
+from mechsys.model.yamlpos import Path
+
+# Joint class c = 6 - NCE (Krodkiewski eq. 1.2); 'transform' counts the coordinates it uses.
+JOINT_CLASS = {"revolute": 1, "prismatic": 1, "cylindrical": 2, "universal": 2, "spherical": 3,
+               "planar": 3, "fixed": 0, "free": 6}
+ROTATION_JOINTS = {"revolute", "spherical", "universal"}
+
+
+@dataclass
+class Body:
+    """A massive link: mass, ground position of its centre of mass and central inertia in link axes."""
+
+    name: str
+    mass: sp.Expr
+    com_local: sp.Matrix
+    inertia: sp.Matrix
+    particle: bool
+
+
+@dataclass
+class JointInfo:
+    link: str
+    parent: str
+    type: str
+    coordinates: list[str]
+    joint_class: int
+
+    @property
+    def reactions(self) -> int:
+        return 6 - self.joint_class
+
+
+@dataclass
+class Load:
+    """One force element, already in symbols: kind tells derive how to use the fields."""
+
+    kind: str
+    data: dict[str, Any]
+
+
+@dataclass
+class ConstraintRow:
+    name: str
+    kind: str  # "holonomic" or "nonholonomic"
+    position: sp.Expr | None  # Phi(q, t) for holonomic rows
+    velocity: sp.Expr  # linear in the rates
+    equations: int = 1  # scalar equations this element contributes (for mobility counting)
+
+
+@dataclass
+class Kinematics:
+    frames: dict[str, FrameState] = field(default_factory=dict)
+    bodies: list[Body] = field(default_factory=list)
+    joints: list[JointInfo] = field(default_factory=list)
+    loads: list[Load] = field(default_factory=list)
+    constraints: list[ConstraintRow] = field(default_factory=list)
+    constraint_elements: list[tuple[str, int]] = field(default_factory=list)  # (type, NCE)
+    angles: dict[str, bool] = field(default_factory=dict)
+
+
+class Builder:
+    def __init__(self, doc: Document) -> None:
+        self.doc = doc
+        self.kin = Kinematics()
+        self.used_by: dict[str, str] = {}
+
+    # ------------------------------------------------------------------------------------- helpers
+    def axis(self, value: Any, path: Path) -> sp.Matrix:
+        if isinstance(value, str):
+            return sp.Matrix(AXES[value])
+        vec = self.doc.parse_vec(value, path, "kinematic")
+        if all(e == 0 for e in vec):
+            raise self.doc.error(path, "axis must not be the zero vector")
+        if vec.free_symbols - set(self.doc.parameters.values()):
+            raise self.doc.error(path, "an axis may depend on parameters only")
+        return unit(vec)
+
+    def frame(self, name: str, path: Path) -> FrameState:
+        if name == "ground":
+            return FrameState.ground()
+        if name not in self.kin.frames:
+            options = ["ground"] + list(self.doc.spec.links)
+            raise self.doc.error(path, f"unknown link {name!r}{self.doc.suggest(name, options)}")
+        return self.kin.frames[name]
+
+    def local_point(self, link: str, point: str, path: Path) -> sp.Matrix:
+        """Coordinates of a named point in its link's axes."""
+        if link == "ground":
+            pts = self.doc.spec.ground.points
+            base: Path = ("ground", "points", point)
+        else:
+            spec = self.doc.spec.links[link]
+            pts = spec.points
+            base = ("links", link, "points", point)
+            if point == "com":
+                return self.doc.parse_vec(spec.center_of_mass, ("links", link, "center_of_mass"))
+            if point == "origin":
+                return sp.zeros(3, 1)
+        if point not in pts:
+            options = list(pts) + ([] if link == "ground" else ["com", "origin"])
+            raise self.doc.error(path, f"unknown point {point!r} of {link!r}{self.doc.suggest(point, options)}")
+        return self.doc.parse_vec(pts[point], base)
+
+    def point(self, ref: str, path: Path) -> sp.Matrix:
+        """Ground position of a point reference ``link``, ``link.com``, ``link.NAME``, ``ground.NAME``."""
+        frame, local = self.point_on(ref, path)
+        return frame.point(local)
+
+    def point_on(self, ref: str, path: Path) -> tuple[FrameState, sp.Matrix]:
+        """The frame a point reference belongs to and its coordinates in that frame."""
+        link, _, name = ref.partition(".")
+        frame = self.frame(link, path)
+        return frame, (self.local_point(link, name, path) if name else sp.zeros(3, 1))
+
+    @staticmethod
+    def relative_omega(axes: FrameState, axes_name: str, body: FrameState, body_name: str) -> sp.Matrix:
+        """Angular velocity of ``body`` in the components of ``axes``."""
+        if axes_name == body_name:
+            return body.omega
+        return axes.R.T * body.R * body.omega
+
+    def claim(self, coord: str, link: str, path: Path) -> None:
+        doc = self.doc
+        if coord not in doc.coords and coord not in doc.prescribed:
+            options = list(doc.coords) + list(doc.prescribed)
+            raise doc.error(path, f"unknown coordinate {coord!r}{doc.suggest(coord, options)}")
+        if coord in self.used_by:
+            raise doc.error(path, f"coordinate {coord!r} is already used by the joint of link {self.used_by[coord]!r}")
+        self.used_by[coord] = link
+
+    def coord_expr(self, name: str) -> sp.Expr:
+        return self.doc.coords.get(name, self.doc.prescribed.get(name))
+
+    def rate_of(self, expr: sp.Expr) -> sp.Expr:
+        out = sp.diff(expr, T)
+        for name, q in self.doc.coords.items():
+            out += sp.diff(expr, q) * self.doc.rates[name]
+        return out
+
+    # ------------------------------------------------------------------------------------- links
+    def build(self) -> Kinematics:
+        self.build_links()
+        self.build_bodies()
+        self.build_constraints()
+        self.build_loads()
+        return self.kin
+
+    def link_order(self) -> list[str]:
+        links = self.doc.spec.links
+        if "ground" in links:
+            raise self.doc.error(("links", "ground"), "'ground' is reserved for the fixed frame", key=True)
+        order: list[str] = []
+        placed = {"ground"}
+        for name, spec in links.items():
+            parent = spec.joint.parent
+            if parent != "ground" and parent not in links:
+                options = ["ground"] + [n for n in links if n != name]
+                raise self.doc.error(("links", name, "joint", "parent"),
+                                     f"parent link {parent!r} does not exist{self.doc.suggest(parent, options)}")
+            if parent == name:
+                raise self.doc.error(("links", name, "joint", "parent"), "a link cannot be its own parent")
+        pending = list(links)
+        while pending:
+            ready = [n for n in pending if links[n].joint.parent in placed]
+            if not ready:
+                name = pending[0]
+                cycle = [name]
+                nxt = links[name].joint.parent
+                while nxt not in cycle and nxt in links:
+                    cycle.append(nxt)
+                    nxt = links[nxt].joint.parent
+                raise self.doc.error(("links", name, "joint", "parent"),
+                                     f"links form a cycle: {' -> '.join(cycle + [nxt])} (use a constraint to close a loop)")
+            for n in ready:
+                order.append(n)
+                placed.add(n)
+                pending.remove(n)
+        return order
+
+    def build_links(self) -> None:
+        for name in self.link_order():
+            spec = self.doc.spec.links[name]
+            j = spec.joint
+            jp: Path = ("links", name, "joint")
+            parent = self.frame(j.parent, jp + ("parent",))
+            if isinstance(j.origin, str):
+                origin = self.local_point(j.parent, j.origin, jp + ("origin",))
+            else:
+                origin = self.doc.parse_vec(j.origin, jp + ("origin",))
+            f = self.move(parent, origin)
+            coords: list[str] = []
+            if j.type == "transform":
+                f, coords = self.transform(f, j.steps, name, jp)
+                jclass = len(coords)
+            else:
+                names = [j.coordinate] if hasattr(j, "coordinate") else list(getattr(j, "coordinates", []))
+                key = "coordinate" if hasattr(j, "coordinate") else "coordinates"
+                for i, c in enumerate(names):
+                    self.claim(c, name, jp + ((key,) if key == "coordinate" else (key, i)))
+                coords = names
+                f = self.joint_motion(f, j, names, jp)
+                jclass = JOINT_CLASS[j.type]
+            self.kin.frames[name] = f
+            self.kin.joints.append(JointInfo(name, j.parent, j.type, coords, jclass))
+
+    def rotate(self, f: FrameState, axis: sp.Matrix, angle: sp.Expr) -> FrameState:
+        return f.rotated(axis, angle, self.rate_of(angle))
+
+    def move(self, f: FrameState, offset: sp.Matrix) -> FrameState:
+        return f.translated(offset, self.rate_of(offset))
+
+    def joint_motion(self, f: FrameState, j: Any, names: list[str], jp: Path) -> FrameState:
+        q = [self.coord_expr(n) for n in names]
+        angles = self.kin.angles
+        if j.type == "revolute":
+            angles.setdefault(names[0], True)
+            return self.rotate(f, self.axis(j.axis, jp + ("axis",)), q[0])
+        if j.type == "prismatic":
+            angles.setdefault(names[0], False)
+            return self.move(f, self.axis(j.axis, jp + ("axis",)) * q[0])
+        if j.type == "cylindrical":
+            a = self.axis(j.axis, jp + ("axis",))
+            angles.setdefault(names[0], True)
+            angles.setdefault(names[1], False)
+            return self.rotate(self.move(f, a * q[1]), a, q[0])
+        if j.type == "universal":
+            for n in names:
+                angles.setdefault(n, True)
+            for k in range(2):
+                f = self.rotate(f, self.axis(j.axes[k], jp + ("axes", k)), q[k])
+            return f
+        if j.type in ("spherical", "free"):
+            rot = q
+            if j.type == "free":
+                f = self.move(f, sp.Matrix(q[:3]))
+                rot = q[3:]
+                for n in names[:3]:
+                    angles.setdefault(n, False)
+            for n in names[-3:]:
+                angles.setdefault(n, True)
+            for ax, angle in zip(j.sequence, rot):
+                f = self.rotate(f, sp.Matrix(AXES[ax]), angle)
+            return f
+        if j.type == "planar":
+            n = j.normal.lstrip("-")
+            e1, e2 = {"x": ("y", "z"), "y": ("z", "x"), "z": ("x", "y")}[n]
+            angles.setdefault(names[0], False)
+            angles.setdefault(names[1], False)
+            angles.setdefault(names[2], True)
+            f = self.move(f, sp.Matrix(AXES[e1]) * q[0] + sp.Matrix(AXES[e2]) * q[1])
+            return self.rotate(f, sp.Matrix(AXES[j.normal]), q[2])
+        if j.type == "fixed":
+            return f
+        raise AssertionError(j.type)
+
+    def transform(self, f: FrameState, steps: list, link: str, jp: Path) -> tuple[FrameState, list[str]]:
+        used: list[str] = []
+        known = set(self.doc.coords) | set(self.doc.prescribed)
+        for i, step in enumerate(steps):
+            sp_path = jp + ("steps", i)
+            if (step.rotate is None) == (step.translate is None):
+                raise self.doc.error(sp_path, "each step needs exactly one of 'rotate' or 'translate'")
+            if step.rotate is not None:
+                raw = [step.rotate.angle]
+                angle = self.doc.parse(step.rotate.angle, sp_path + ("rotate", "angle"))
+                f = self.rotate(f, self.axis(step.rotate.axis, sp_path + ("rotate", "axis")), angle)
+                if isinstance(step.rotate.angle, str) and step.rotate.angle.strip() in known:
+                    self.kin.angles.setdefault(step.rotate.angle.strip(), True)
+                where = sp_path + ("rotate", "angle")
+            else:
+                raw = list(step.translate)
+                f = self.move(f, self.doc.parse_vec(step.translate, sp_path + ("translate",)))
+                where = sp_path + ("translate",)
+            for text in raw:
+                for n in sorted(names_in(text) & known):
+                    if n not in used:
+                        if self.used_by.get(n, link) != link:
+                            raise self.doc.error(where, f"coordinate {n!r} is already used by the joint of link "
+                                                        f"{self.used_by[n]!r}")
+                        self.used_by[n] = link
+                        used.append(n)
+        return f, used
+
+    # ------------------------------------------------------------------------------------- bodies
+    def build_bodies(self) -> None:
+        for name, spec in self.doc.spec.links.items():
+            lp: Path = ("links", name)
+            m = self.doc.parse(spec.mass, lp + ("mass",), "parameter")
+            com = self.doc.parse_vec(spec.center_of_mass, lp + ("center_of_mass",), "parameter")
+            if spec.particle and (spec.inertia is not None or spec.shape is not None):
+                raise self.doc.error(lp + ("inertia" if spec.inertia is not None else "shape",),
+                                     "a particle has no inertia tensor or shape")
+            if spec.inertia is not None and spec.shape is not None:
+                raise self.doc.error(lp + ("shape",), "give either 'inertia' or 'shape', not both")
+            inertia = sp.zeros(3, 3)
+            if spec.inertia is not None:
+                ip = lp + ("inertia",)
+                c = {k: self.doc.parse(getattr(spec.inertia, k), ip + (k,), "parameter")
+                     for k in ("xx", "yy", "zz", "xy", "xz", "yz")}
+                inertia = sp.Matrix([[c["xx"], -c["xy"], -c["xz"]],
+                                     [-c["xy"], c["yy"], -c["yz"]],
+                                     [-c["xz"], -c["yz"], c["zz"]]])
+                if spec.inertia_about == "origin":
+                    # parallel-axis theorem: I_G = I_O - m (|c|^2 E - c c^T)
+                    inertia = inertia - m * ((com.T * com)[0] * sp.eye(3) - com * com.T)
+            elif spec.shape is not None:
+                inertia = self.shape_inertia(spec.shape, m, lp + ("shape",))
+            if m == 0 and inertia == sp.zeros(3, 3):
+                continue
+            self.kin.bodies.append(Body(name, m, com, inertia, spec.particle))
+
+    def shape_inertia(self, shape: Any, m: sp.Expr, path: Path) -> sp.Matrix:
+        given = [k for k in ("rod", "disk", "cylinder", "sphere", "box") if getattr(shape, k) is not None]
+        if len(given) != 1:
+            raise self.doc.error(path, "give exactly one shape: rod, disk, cylinder, sphere or box")
+        kind = given[0]
+        s = getattr(shape, kind)
+        p = path + (kind,)
+        par = lambda key: self.doc.parse(getattr(s, key), p + (key,), "parameter")  # noqa: E731
+        if kind == "sphere":
+            i = sp.Rational(2, 5) * m * par("radius") ** 2
+            return sp.diag(i, i, i)
+        if kind == "box":
+            a, b, c = self.doc.parse_vec(s.size, p + ("size",), "parameter")
+            return sp.diag(m * (b**2 + c**2), m * (a**2 + c**2), m * (a**2 + b**2)) / 12
+        if kind == "rod":
+            axial, trans = sp.Integer(0), m * par("length") ** 2 / 12
+        elif kind == "disk":
+            r = par("radius")
+            axial, trans = m * r**2 / 2, m * r**2 / 4
+        else:
+            r, length = par("radius"), par("length")
+            axial, trans = m * r**2 / 2, m * (3 * r**2 + length**2) / 12
+        k = "xyz".index(s.axis.lstrip("-"))
+        diag = [trans, trans, trans]
+        diag[k] = axial
+        return sp.diag(*diag)
+
+    # ------------------------------------------------------------------------------------- constraints
+    def build_constraints(self) -> None:
+        for i, c in enumerate(self.doc.spec.constraints):
+            cp: Path = ("constraints", i)
+            name = c.name or f"{c.type}_{i + 1}"
+            rows: list[ConstraintRow] = []
+            if c.type == "holonomic":
+                phi = self.doc.parse(c.expression, cp + ("expression",))
+                rows = [ConstraintRow(name, "holonomic", phi, self.rate_of(phi))]
+            elif c.type == "nonholonomic":
+                e = self.doc.parse(c.expression, cp + ("expression",), "force")
+                rates = list(self.doc.rates.values())
+                if any(sp.diff(e, u, 2) != 0 for u in rates) or any(
+                        sp.diff(e, u, v) != 0 for u in rates for v in rates if u != v):
+                    raise self.doc.error(cp + ("expression",), "a nonholonomic constraint must be linear in the rates")
+                rows = [ConstraintRow(name, "nonholonomic", None, e)]
+            elif c.type == "point_on_point":
+                a = self.point(c.points[0], cp + ("points", 0))
+                b = self.point(c.points[1], cp + ("points", 1))
+                rows = [ConstraintRow(f"{name}.{ax}", "holonomic", a[k] - b[k], self.rate_of(a[k] - b[k]))
+                        for k, ax in enumerate("xyz")]
+            elif c.type in ("point_on_line", "point_on_plane"):
+                p = self.point(c.point, cp + ("point",))
+                o = self.point(c.through, cp + ("through",))
+                fr = self.frame(c.frame, cp + ("frame",))
+                if c.type == "point_on_line":
+                    d = self.axis(c.direction, cp + ("direction",))
+                    normals = _complement(d)
+                else:
+                    normals = [self.axis(c.normal, cp + ("normal",))]
+                rows = []
+                for k, n in enumerate(normals):
+                    phi = (fr.R * n).dot(p - o)
+                    rows.append(ConstraintRow(f"{name}.{k + 1}", "holonomic", phi, self.rate_of(phi)))
+            elif c.type == "rolling":
+                rows = self.rolling(c, name, cp)
+            kept = [r for r in rows if not _identically_zero(r.velocity, self.doc)]
+            if not kept:
+                raise self.doc.error(cp, "this constraint references no coordinate (it is identically satisfied)")
+            self.kin.constraints.extend(kept)
+            self.kin.constraint_elements.append((c.type, len(kept)))
+
+    def rolling(self, c: Any, name: str, cp: Path) -> list[ConstraintRow]:
+        body = self.frame(c.link, cp + ("link",))
+        axes = self.frame(c.frame or c.link, cp + ("frame",))
+        r_rel = axes.R * self.doc.parse_vec(c.contact, cp + ("contact",))
+        contact = body.origin + r_rel
+        v_link = body.home_R * body.v + body.omega_ground.cross(r_rel)
+        surface = self.frame(c.on, cp + ("on",))
+        v_surf = surface.home_R * surface.v + surface.omega_ground.cross(contact - surface.origin)
+        slip = v_link - v_surf
+        return [ConstraintRow(f"{name}.{ax}", "nonholonomic", None, slip["xyz".index(ax)]) for ax in c.components]
+
+    # ------------------------------------------------------------------------------------- loads
+    def build_loads(self) -> None:
+        doc = self.doc
+        for i, f in enumerate(doc.spec.forces):
+            fp: Path = ("forces", i)
+            data: dict[str, Any] = {}
+            if f.type == "gravity":
+                data["g"] = doc.parse_vec(f.acceleration, fp + ("acceleration",), "force")
+            elif f.type == "force":
+                frame, local = self.point_on(f.at, fp + ("at",))
+                force = self.frame(f.frame, fp + ("frame",)).R * doc.parse_vec(f.value, fp + ("value",), "force")
+                data["v"] = frame.point_velocity(local)
+                data["F"] = frame.to_home(force)
+            elif f.type == "torque":
+                on = self.frame(f.on, fp + ("on",))
+                axes = self.frame(f.frame or f.on, fp + ("frame",))
+                if isinstance(f.value, list):
+                    if f.axis is not None:
+                        raise doc.error(fp + ("axis",), "give 'axis' only with a scalar 'value'")
+                    vec = doc.parse_vec(f.value, fp + ("value",), "force")
+                else:
+                    if f.axis is None:
+                        raise doc.error(fp + ("value",), "a scalar torque needs an 'axis'")
+                    vec = self.axis(f.axis, fp + ("axis",)) * doc.parse(f.value, fp + ("value",), "force")
+                # power = M . (omega_on - omega_reaction), both taken in the torque's axes
+                frame_name = f.frame or f.on
+                w = self.relative_omega(axes, frame_name, on, f.on)
+                if f.reaction:
+                    w = w - self.relative_omega(axes, frame_name, self.frame(f.reaction, fp + ("reaction",)),
+                                                f.reaction)
+                data["M"] = vec
+                data["w"] = w
+            elif f.type in ("spring", "damper", "actuator"):
+                a = self.point(f.between[0], fp + ("between", 0))
+                b = self.point(f.between[1], fp + ("between", 1))
+                data["d"] = a - b
+                if f.type == "spring":
+                    data["k"] = doc.parse(f.stiffness, fp + ("stiffness",), "kinematic")
+                    data["l0"] = doc.parse(f.free_length, fp + ("free_length",), "kinematic")
+                elif f.type == "damper":
+                    data["c"] = doc.parse(f.coefficient, fp + ("coefficient",), "force")
+                else:
+                    data["value"] = doc.parse(f.value, fp + ("value",), "force")
+            elif f.type in ("torsional_spring", "torsional_damper", "generalized_force"):
+                if f.coordinate not in doc.coords and f.coordinate not in doc.prescribed:
+                    options = list(doc.coords) + list(doc.prescribed)
+                    raise doc.error(fp + ("coordinate",),
+                                    f"unknown coordinate {f.coordinate!r}{doc.suggest(f.coordinate, options)}")
+                data["coordinate"] = f.coordinate
+                if f.type == "torsional_spring":
+                    data["k"] = doc.parse(f.stiffness, fp + ("stiffness",), "kinematic")
+                    data["q0"] = doc.parse(f.free_angle, fp + ("free_angle",), "kinematic")
+                elif f.type == "torsional_damper":
+                    data["c"] = doc.parse(f.coefficient, fp + ("coefficient",), "force")
+                else:
+                    data["value"] = doc.parse(f.value, fp + ("value",), "force")
+            elif f.type == "dissipation":
+                data["D"] = doc.parse(f.value, fp + ("value",), "force")
+            elif f.type == "potential":
+                data["V"] = doc.parse(f.value, fp + ("value",), "kinematic")
+            self.kin.loads.append(Load(f.type, data))
+
+
+def _complement(d: sp.Matrix) -> list[sp.Matrix]:
+    """Two unit vectors orthogonal to unit vector ``d``."""
+    key = tuple(abs(e) if e.is_number else None for e in d)
+    if key in ((1, 0, 0), (0, 1, 0), (0, 0, 1)):
+        k = key.index(1)
+        return [sp.Matrix(AXES["xyz"[(k + 1) % 3]]), sp.Matrix(AXES["xyz"[(k + 2) % 3]])]
+    helper = sp.Matrix([1, 0, 0]) if abs(float(d[0])) < 0.9 else sp.Matrix([0, 1, 0])
+    n1 = unit(d.cross(helper))
+    return [n1, d.cross(n1)]
+
+
+def _identically_zero(expr: sp.Expr, doc: Document) -> bool:
+    """True when ``expr`` vanishes structurally, or at several random states (then it is identically 0)."""
+    expr = sp.sympify(expr)
+    if expr == 0:
+        return True
+    import random
+
+    rng = random.Random(1234)
+    symbols = sorted(expr.free_symbols, key=str)
+    values = dict(doc.numeric_parameters())
+    for _ in range(4):
+        subs = {s: values.get(s, rng.uniform(-1.3, 1.7)) for s in symbols}
+        try:
+            val = complex(expr.evalf(subs=subs))
+        except (TypeError, ValueError):
+            return False
+        if abs(val) > 1e-12:
+            return False
+    return True

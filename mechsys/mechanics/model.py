@@ -1,0 +1,260 @@
+"""The one symbolic model every analysis uses: lazy T, V, Q and M(q,t) q'' = f(q, q', t) (Lagrange or Kane)."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from functools import cached_property
+
+import sympy as sp
+
+from mechsys.mechanics.build import Body, Builder, Kinematics
+from mechsys.mechanics.kinematics import FrameState, time_derivative
+from mechsys.model.load import T as TIME
+from mechsys.model.load import Document
+
+METHODS = ("lagrange", "kane")
+
+
+@dataclass
+class Equations:
+    """Equations of motion ``M q'' = f + A^T lambda`` with constraints ``A q'' = b`` (rows may be empty).
+
+    For holonomic rows A = dPhi/dq; for nonholonomic rows A is the coefficient matrix of the rates.
+    ``Q`` are the generalized forces not derived from V (dampers, applied forces and torques...).
+    """
+
+    method: str
+    coordinates: list[str]
+    q: list[sp.Symbol]
+    u: list[sp.Symbol]
+    a: list[sp.Symbol]
+    M: sp.Matrix
+    f: sp.Matrix
+    Q: sp.Matrix
+    T: sp.Expr
+    V: sp.Expr
+    A: sp.Matrix = field(default_factory=lambda: sp.zeros(0, 0))
+    b: sp.Matrix = field(default_factory=lambda: sp.zeros(0, 1))
+    constraint_names: list[str] = field(default_factory=list)
+
+    def residual(self) -> sp.Matrix:
+        """M q'' - f, in the acceleration symbols (constraint forces not included)."""
+        return self.M * sp.Matrix(self.a) - self.f
+
+
+class MechanicalModel:
+    """A mechanical system: the document it came from, its kinematics, and derivations made on demand."""
+
+    def __init__(self, doc: Document) -> None:
+        self.doc = doc
+        self.kin: Kinematics = Builder(doc).build()
+        self.name = doc.spec.name
+        self.coordinates = list(doc.coords)
+        self.q = [doc.coords[n] for n in self.coordinates]
+        self.u = [doc.rates[n] for n in self.coordinates]
+        self.a = [doc.accels[n] for n in self.coordinates]
+        self.t = TIME
+        self._eqs: dict[str, Equations] = {}
+
+    # ------------------------------------------------------------------------------------- basics
+    @property
+    def parameters(self) -> dict[str, float]:
+        return dict(self.doc.parameter_values)
+
+    @property
+    def parameter_symbols(self) -> list[sp.Symbol]:
+        return list(self.doc.parameters.values())
+
+    @property
+    def prescribed(self) -> dict[str, sp.Expr]:
+        return dict(self.doc.prescribed)
+
+    def dt(self, expr: sp.Expr | sp.Matrix, with_accels: bool = False) -> sp.Expr | sp.Matrix:
+        return time_derivative(expr, self.q, self.u, self.t, self.a if with_accels else None)
+
+    def velocity(self, r: sp.Matrix) -> sp.Matrix:
+        """Ground velocity of a point with ground position ``r(q, t)``, linear in the rates."""
+        return r.jacobian(self.q) * sp.Matrix(self.u) + r.diff(self.t) if self.q else r.diff(self.t)
+
+    def com(self, body: Body) -> sp.Matrix:
+        return self.kin.frames[body.name].point(body.com_local)
+
+    @cached_property
+    def _body_kinematics(self) -> list[tuple[Body, sp.Matrix, sp.Matrix, sp.Matrix, FrameState]]:
+        """(body, r_G in ground axes, v_G in home axes, omega in body axes, frame) for each massive link."""
+        out = []
+        for b in self.kin.bodies:
+            frame = self.kin.frames[b.name]
+            out.append((b, self.com(b), frame.point_velocity(b.com_local), frame.omega, frame))
+        return out
+
+    # ------------------------------------------------------------------------------------- energies
+    @cached_property
+    def kinetic_energy(self) -> sp.Expr:
+        T = sp.Integer(0)
+        for b, _r, v, w, _f in self._body_kinematics:
+            T += b.mass * (v.T * v)[0] / 2
+            if not b.particle and b.inertia != sp.zeros(3, 3):
+                T += (w.T * b.inertia * w)[0] / 2
+        return T
+
+    @cached_property
+    def potential_energy(self) -> sp.Expr:
+        V = sp.Integer(0)
+        for load in self.kin.loads:
+            d = load.data
+            if load.kind == "gravity":
+                for b, r, _v, _w, _f in self._body_kinematics:
+                    if b.mass != 0:
+                        V -= b.mass * (d["g"].T * r)[0]
+            else:
+                V += self._elastic_potential(load.kind, d)
+        return V
+
+    def _elastic_potential(self, kind: str, d: dict) -> sp.Expr:
+        if kind == "spring":
+            sq = (d["d"].T * d["d"])[0]
+            if d["l0"] == 0:
+                return d["k"] * sq / 2
+            return d["k"] * (sp.sqrt(sq) - d["l0"]) ** 2 / 2
+        if kind == "torsional_spring":
+            q = self.doc.coords.get(d["coordinate"], self.doc.prescribed.get(d["coordinate"]))
+            return d["k"] * (q - d["q0"]) ** 2 / 2
+        if kind == "potential":
+            return d["V"]
+        return sp.Integer(0)
+
+    # ------------------------------------------------------------------------------------- forces
+    @cached_property
+    def generalized_forces(self) -> sp.Matrix:
+        """Generalized forces not derived from V, by virtual power: Q_i = sum F . dv/d(der(q_i))."""
+        n = len(self.q)
+        Q = sp.zeros(n, 1)
+        for load in self.kin.loads:
+            d = load.data
+            if load.kind == "force":
+                Q += d["v"].jacobian(self.u).T * d["F"] if n else sp.zeros(0, 1)
+            elif load.kind == "torque":
+                Q += d["w"].jacobian(self.u).T * d["M"] if n else sp.zeros(0, 1)
+            elif load.kind in ("damper", "actuator"):
+                length = sp.sqrt((d["d"].T * d["d"])[0])
+                dl = sp.Matrix([sp.diff(length, q) for q in self.q])
+                if load.kind == "damper":
+                    Q += -d["c"] * self.dt(length) * dl
+                else:
+                    Q += d["value"] * dl
+            elif load.kind in ("torsional_damper", "generalized_force"):
+                name = d["coordinate"]
+                if name in self.coordinates:
+                    i = self.coordinates.index(name)
+                    Q[i] += -d["c"] * self.u[i] if load.kind == "torsional_damper" else d["value"]
+            elif load.kind == "dissipation":
+                Q += -sp.Matrix([sp.diff(d["D"], u) for u in self.u])
+        return Q
+
+    def _potential_force_kane(self) -> sp.Matrix:
+        """Conservative generalized forces for Kane's route: gravity as forces at the centres of mass,
+        the other potentials as -dV/dq."""
+        n = len(self.q)
+        Qc = sp.zeros(n, 1)
+        for load in self.kin.loads:
+            if load.kind == "gravity":
+                for b, _r, v, _w, frame in self._body_kinematics:
+                    if b.mass != 0 and n:
+                        Qc += v.jacobian(self.u).T * (b.mass * frame.to_home(load.data["g"]))
+            else:
+                V = self._elastic_potential(load.kind, load.data)
+                if V != 0:
+                    Qc -= sp.Matrix([sp.diff(V, q) for q in self.q])
+        return Qc
+
+    # ------------------------------------------------------------------------------------- constraints
+    @cached_property
+    def constraint_velocity(self) -> sp.Matrix:
+        """Velocity-level constraint expressions, each linear in the rates (holonomic rows differentiated)."""
+        return sp.Matrix([c.velocity for c in self.kin.constraints])
+
+    @cached_property
+    def constraint_jacobian(self) -> sp.Matrix:
+        if not self.kin.constraints:
+            return sp.zeros(0, len(self.q))
+        return self.constraint_velocity.jacobian(self.u)
+
+    @cached_property
+    def constraint_rhs(self) -> sp.Matrix:
+        """b in A q'' = b: minus the part of d/dt(A q' + a_t) without accelerations."""
+        if not self.kin.constraints:
+            return sp.zeros(0, 1)
+        return -self.dt(self.constraint_velocity)
+
+    @cached_property
+    def holonomic_constraints(self) -> sp.Matrix:
+        return sp.Matrix([c.position for c in self.kin.constraints if c.kind == "holonomic"])
+
+    # ------------------------------------------------------------------------------------- equations
+    def equations(self, method: str = "lagrange") -> Equations:
+        """Derive (once per method) the equations of motion; never inverts M, never simplifies."""
+        if method not in METHODS:
+            raise ValueError(f"unknown method {method!r}; use one of {METHODS}")
+        if method not in self._eqs:
+            M, f = self._lagrange() if method == "lagrange" else self._kane()
+            self._eqs[method] = Equations(
+                method, self.coordinates, self.q, self.u, self.a, M, f, self.generalized_forces,
+                self.kinetic_energy, self.potential_energy, self.constraint_jacobian, self.constraint_rhs,
+                [c.name for c in self.kin.constraints])
+        return self._eqs[method]
+
+    def _lagrange(self) -> tuple[sp.Matrix, sp.Matrix]:
+        """d/dt(dT/du) - dT/dq + dV/dq = Q, expanded by the chain rule: M = d2T/du2, f = the rest."""
+        T, V, Q = self.kinetic_energy, self.potential_energy, self.generalized_forces
+        n = len(self.q)
+        M = sp.zeros(n, n)
+        f = sp.zeros(n, 1)
+        for i in range(n):
+            p = sp.diff(T, self.u[i])
+            for j in range(n):
+                M[i, j] = sp.diff(p, self.u[j]) if j >= i else M[j, i]
+            f[i] = Q[i] - sp.diff(V, self.q[i]) + sp.diff(T, self.q[i]) - self.dt(p)
+        return M, f
+
+    def _kane(self) -> tuple[sp.Matrix, sp.Matrix]:
+        """Kane: F_r + F*_r = 0 with partial velocities; gravity enters as forces, not through V."""
+        n = len(self.q)
+        M = sp.zeros(n, n)
+        f = self.generalized_forces + self._potential_force_kane()
+        for b, _r, v, w, _f in self._body_kinematics:
+            Jv = v.jacobian(self.u)
+            a0 = self.dt(v)  # acceleration of G with q'' = 0
+            if b.mass != 0:
+                M += b.mass * Jv.T * Jv
+                f -= b.mass * Jv.T * a0
+            if not b.particle and b.inertia != sp.zeros(3, 3):
+                Jw = w.jacobian(self.u)
+                I = b.inertia
+                alpha0 = self.dt(w)  # body-axes components: d/dt in the body equals the inertial rate
+                M += Jw.T * I * Jw
+                f -= Jw.T * (I * alpha0 + w.cross(I * w))
+        return M, f
+
+    # ------------------------------------------------------------------------------------- classification
+    @property
+    def is_holonomic(self) -> bool:
+        return all(c.kind == "holonomic" for c in self.kin.constraints)
+
+    @cached_property
+    def is_rheonomic(self) -> bool:
+        if self.doc.prescribed:
+            return True
+        exprs = [f.origin for f in self.kin.frames.values()] + [f.R for f in self.kin.frames.values()]
+        exprs += [c.velocity for c in self.kin.constraints]
+        return any(self.t in sp.sympify(e).free_symbols for e in exprs)
+
+    def is_autonomous(self, method: str = "lagrange") -> bool:
+        eq = self.equations(method)
+        return all(self.t not in sp.sympify(m).free_symbols for m in (eq.M, eq.f, eq.A, eq.b))
+
+    def cyclic_coordinates(self, method: str = "lagrange") -> list[str]:
+        eq = self.equations(method)
+        syms: set = set()
+        for m in (eq.M, eq.f, eq.A, eq.b):
+            syms |= sp.sympify(m).free_symbols
+        return [n for n, q in zip(self.coordinates, self.q) if q not in syms]

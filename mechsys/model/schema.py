@@ -1,0 +1,335 @@
+"""The mechsys YAML language v1 as pydantic models (structure only; expressions are parsed later)."""
+from __future__ import annotations
+
+from typing import Annotated, Literal, Union
+
+from pydantic import BaseModel, ConfigDict, Field, field_validator
+
+Expr = Union[int, float, str]
+"""A number or an expression string (parameters, coordinates, der(q), t; see docs/yaml-reference.md)."""
+Vec3 = Annotated[list[Expr], Field(min_length=3, max_length=3)]
+AxisName = Literal["x", "y", "z", "-x", "-y", "-z"]
+Axis = Union[AxisName, Vec3]
+PointRef = str
+"""``link`` (its origin), ``link.com``, ``link.NAME`` (a named point), ``ground`` or ``ground.NAME``."""
+Name = Annotated[str, Field(pattern=r"^[A-Za-z_][A-Za-z_0-9]*$")]
+
+
+class Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", populate_by_name=True)
+
+
+# ----------------------------------------------------------------------------------------- coordinates
+class Coordinate(Strict):
+    """A generalized coordinate: free (initial value and rate) or prescribed as a function of ``t``."""
+
+    initial: Expr = 0
+    rate: Expr = 0
+    prescribed: Expr | None = Field(None, description="expression of t and parameters (rheonomic driver)")
+    angle: bool | None = Field(None, description="angular (wraps modulo 2*pi); default: inferred from joints")
+
+
+# ----------------------------------------------------------------------------------------- inertia
+class Inertia(Strict):
+    """Inertia tensor components in link axes. Products are the integrals I_xy = ∫xy dm (book convention):
+    the tensor holds -xy off the diagonal."""
+
+    xx: Expr = 0
+    yy: Expr = 0
+    zz: Expr = 0
+    xy: Expr = 0
+    xz: Expr = 0
+    yz: Expr = 0
+
+
+class Rod(Strict):
+    length: Expr
+    axis: AxisName = "z"
+
+
+class Disk(Strict):
+    radius: Expr
+    axis: AxisName = "z"
+
+
+class Cylinder(Strict):
+    radius: Expr
+    length: Expr
+    axis: AxisName = "z"
+
+
+class Sphere(Strict):
+    radius: Expr
+
+
+class Box(Strict):
+    size: Vec3
+
+
+class Shape(Strict):
+    """Exactly one shape helper: central inertia of a uniform body of the link's mass."""
+
+    rod: Rod | None = None
+    disk: Disk | None = None
+    cylinder: Cylinder | None = None
+    sphere: Sphere | None = None
+    box: Box | None = None
+
+
+# ----------------------------------------------------------------------------------------- joints
+class _JointBase(Strict):
+    parent: str = Field(description="parent link name, or 'ground'")
+    origin: Vec3 | str = Field(default_factory=lambda: [0, 0, 0],
+                               description="joint position in parent axes, or a named point of the parent")
+
+
+class Revolute(_JointBase):
+    type: Literal["revolute"]
+    axis: Axis = "z"
+    coordinate: Name
+
+
+class Prismatic(_JointBase):
+    type: Literal["prismatic"]
+    axis: Axis = "x"
+    coordinate: Name
+
+
+class Cylindrical(_JointBase):
+    type: Literal["cylindrical"]
+    axis: Axis = "z"
+    coordinates: Annotated[list[Name], Field(min_length=2, max_length=2)] = Field(
+        description="[rotation angle, translation]")
+
+
+class Universal(_JointBase):
+    type: Literal["universal"]
+    axes: Annotated[list[Axis], Field(min_length=2, max_length=2)] = Field(default_factory=lambda: ["x", "y"])
+    coordinates: Annotated[list[Name], Field(min_length=2, max_length=2)]
+
+
+class Spherical(_JointBase):
+    type: Literal["spherical"]
+    sequence: Annotated[str, Field(pattern=r"^[xyz]{3}$")] = "zyx"
+    coordinates: Annotated[list[Name], Field(min_length=3, max_length=3)]
+
+
+class Planar(_JointBase):
+    type: Literal["planar"]
+    normal: AxisName = "z"
+    coordinates: Annotated[list[Name], Field(min_length=3, max_length=3)] = Field(
+        description="[translation 1, translation 2, rotation about the normal]")
+
+
+class Fixed(_JointBase):
+    type: Literal["fixed"]
+
+
+class Free(_JointBase):
+    type: Literal["free"]
+    sequence: Annotated[str, Field(pattern=r"^[xyz]{3}$")] = "zyx"
+    coordinates: Annotated[list[Name], Field(min_length=6, max_length=6)] = Field(
+        description="[x, y, z translations in parent axes, then three body-fixed rotation angles]")
+
+
+class Rotate(Strict):
+    axis: Axis
+    angle: Expr
+
+
+class Step(Strict):
+    """One step of a general transform: a rotation or a translation (in the current axes)."""
+
+    rotate: Rotate | None = None
+    translate: Vec3 | None = None
+
+
+class Transform(_JointBase):
+    type: Literal["transform"]
+    steps: list[Step] = Field(min_length=1)
+
+
+Joint = Annotated[
+    Union[Revolute, Prismatic, Cylindrical, Universal, Spherical, Planar, Fixed, Free, Transform],
+    Field(discriminator="type"),
+]
+
+
+# ----------------------------------------------------------------------------------------- links
+class Link(Strict):
+    """A rigid body (or a particle) attached to its parent by a joint."""
+
+    particle: bool = False
+    joint: Joint
+    mass: Expr = 0
+    center_of_mass: Vec3 = Field(default_factory=lambda: [0, 0, 0])
+    inertia: Inertia | None = None
+    inertia_about: Literal["center_of_mass", "origin"] = "center_of_mass"
+    shape: Shape | None = None
+    points: dict[Name, Vec3] = Field(default_factory=dict)
+
+
+class Ground(Strict):
+    points: dict[Name, Vec3] = Field(default_factory=dict)
+
+
+# ----------------------------------------------------------------------------------------- constraints
+class HolonomicConstraint(Strict):
+    type: Literal["holonomic"]
+    name: str | None = None
+    expression: Expr = Field(description="expression of coordinates and t that must stay 0")
+
+
+class PointOnPoint(Strict):
+    type: Literal["point_on_point"]
+    name: str | None = None
+    points: Annotated[list[PointRef], Field(min_length=2, max_length=2)]
+
+
+class PointOnLine(Strict):
+    type: Literal["point_on_line"]
+    name: str | None = None
+    point: PointRef
+    through: PointRef
+    direction: Axis
+    frame: str = "ground"
+
+
+class PointOnPlane(Strict):
+    type: Literal["point_on_plane"]
+    name: str | None = None
+    point: PointRef
+    through: PointRef
+    normal: Axis
+    frame: str = "ground"
+
+
+class NonholonomicConstraint(Strict):
+    type: Literal["nonholonomic"]
+    name: str | None = None
+    expression: Expr = Field(description="expression linear in the rates der(q) that must stay 0")
+
+
+class Rolling(Strict):
+    """Rolling without slip: the link's material point at the contact has the velocity of the surface."""
+
+    type: Literal["rolling"]
+    name: str | None = None
+    link: str
+    contact: Vec3 = Field(description="contact point relative to the link origin, in 'frame' axes")
+    frame: str | None = Field(None, description="axes of 'contact' (a link or ground); default the link")
+    on: str = Field("ground", description="the link rolled on")
+    components: list[Literal["x", "y", "z"]] = Field(default_factory=lambda: ["x", "y", "z"],
+                                                      description="velocity components (in ground axes)")
+
+
+Constraint = Annotated[
+    Union[HolonomicConstraint, PointOnPoint, PointOnLine, PointOnPlane, NonholonomicConstraint, Rolling],
+    Field(discriminator="type"),
+]
+
+
+# ----------------------------------------------------------------------------------------- forces
+class Gravity(Strict):
+    type: Literal["gravity"]
+    acceleration: Vec3
+
+
+class Force(Strict):
+    type: Literal["force"]
+    at: PointRef
+    value: Vec3
+    frame: str = Field("ground", description="axes of the components: ground or a link")
+
+
+class Torque(Strict):
+    type: Literal["torque"]
+    on: str
+    value: Expr | Vec3 = Field(description="a vector, or a scalar about 'axis'")
+    axis: Axis | None = None
+    frame: str | None = Field(None, description="axes of value/axis; default the link 'on'")
+    reaction: str | None = Field(None, description="link (or ground) that receives the opposite torque")
+
+
+class Spring(Strict):
+    type: Literal["spring"]
+    between: Annotated[list[PointRef], Field(min_length=2, max_length=2)]
+    stiffness: Expr
+    free_length: Expr = 0
+
+
+class Damper(Strict):
+    type: Literal["damper"]
+    between: Annotated[list[PointRef], Field(min_length=2, max_length=2)]
+    coefficient: Expr
+
+
+class Actuator(Strict):
+    type: Literal["actuator"]
+    between: Annotated[list[PointRef], Field(min_length=2, max_length=2)]
+    value: Expr = Field(description="force along the line; positive pushes the points apart")
+
+
+class TorsionalSpring(Strict):
+    type: Literal["torsional_spring"]
+    coordinate: Name
+    stiffness: Expr
+    free_angle: Expr = 0
+
+
+class TorsionalDamper(Strict):
+    type: Literal["torsional_damper"]
+    coordinate: Name
+    coefficient: Expr
+
+
+class GeneralizedForce(Strict):
+    type: Literal["generalized_force"]
+    coordinate: Name
+    value: Expr
+
+
+class Dissipation(Strict):
+    type: Literal["dissipation"]
+    value: Expr = Field(description="Rayleigh dissipation function D(q, der(q)); adds -dD/d(der(q))")
+
+
+class Potential(Strict):
+    type: Literal["potential"]
+    value: Expr = Field(description="extra potential energy V(q, t)")
+
+
+ForceSpec = Annotated[
+    Union[Gravity, Force, Torque, Spring, Damper, Actuator, TorsionalSpring, TorsionalDamper, GeneralizedForce,
+          Dissipation, Potential],
+    Field(discriminator="type"),
+]
+
+
+# ----------------------------------------------------------------------------------------- the file
+class System(Strict):
+    """A mechanical system: the root of a mechsys YAML file."""
+
+    name: str
+    description: str | None = None
+    parameters: dict[Name, Expr] = Field(default_factory=dict)
+    coordinates: dict[Name, Coordinate] = Field(default_factory=dict)
+    ground: Ground = Field(default_factory=Ground)
+    links: dict[Name, Link] = Field(min_length=1)
+    constraints: list[Constraint] = Field(default_factory=list)
+    forces: list[ForceSpec] = Field(default_factory=list)
+
+    @field_validator("coordinates", mode="before")
+    @classmethod
+    def _none_is_default(cls, value: object) -> object:
+        if isinstance(value, dict):
+            return {k: ({} if v is None else v) for k, v in value.items()}
+        return value
+
+
+def json_schema() -> dict:
+    """The JSON Schema of the language, for editor completion (``mechsys schema``)."""
+    schema = System.model_json_schema()
+    schema["$schema"] = "https://json-schema.org/draft/2020-12/schema"
+    schema["title"] = "mechsys model file (v1)"
+    return schema
