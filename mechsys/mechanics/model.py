@@ -221,9 +221,11 @@ class MechanicalModel:
         n = len(self.q)
         M = sp.zeros(n, n)
         f = self.generalized_forces + self._potential_force_kane()
-        for b, _r, v, w, _f in self._body_kinematics:
+        for b, _r, v, w, frame in self._body_kinematics:
             Jv = v.jacobian(self.u)
-            a0 = self.dt(v)  # acceleration of G with q'' = 0
+            a0 = self.dt(v)  # acceleration of G with q'' = 0, in home axes
+            if not frame.pure:
+                a0 = a0 + w.cross(v)  # home axes rotate with the body: add omega x v
             if b.mass != 0:
                 M += b.mass * Jv.T * Jv
                 f -= b.mass * Jv.T * a0

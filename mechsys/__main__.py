@@ -1,0 +1,3 @@
+from mechsys.cli import main
+
+main()

@@ -1,0 +1,102 @@
+"""System facts: joints and classes, mobility MO = 6n - sum (6 - c) p_c, DOF, constraint ranks, system class."""
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from mechsys.analysis.crosscheck import random_states
+from mechsys.mechanics.model import MechanicalModel
+from mechsys.numeric.lambdify import compile_matrix
+
+
+@dataclass
+class JointRow:
+    link: str
+    parent: str
+    type: str
+    coordinates: list[str]
+    joint_class: int
+    reactions: int
+
+
+@dataclass
+class Info:
+    name: str
+    moving_links: int
+    joints: list[JointRow]
+    constraints: list[dict]
+    mobility: int
+    prescribed: list[str]
+    dof_formula: int
+    free_coordinates: list[str]
+    constraint_rank: int
+    holonomic_rank: int
+    dof: int
+    configuration_dof: int
+    redundant_constraints: int
+    holonomic: bool
+    rheonomic: bool
+    autonomous: bool
+    cyclic: list[str]
+    massless_coordinates: list[str] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def system_class(self) -> str:
+        parts = ["holonomic" if self.holonomic else "nonholonomic",
+                 "rheonomic" if self.rheonomic else "scleronomic",
+                 "autonomous" if self.autonomous else "non-autonomous"]
+        return ", ".join(parts)
+
+    def to_dict(self) -> dict:
+        out = asdict(self)
+        out["system_class"] = self.system_class
+        return out
+
+
+def _rank(matrix: np.ndarray) -> int:
+    if matrix.size == 0:
+        return 0
+    s = np.linalg.svd(matrix, compute_uv=False)
+    return int(np.sum(s > 1e-9 * max(1.0, s[0])))
+
+
+def system_info(model: MechanicalModel) -> Info:
+    kin = model.kin
+    joints = [JointRow(j.link, j.parent, j.type, j.coordinates, j.joint_class, j.reactions) for j in kin.joints]
+    constraint_rows = [{"type": t, "equations": n} for t, n in kin.constraint_elements]
+    n = len(joints)
+    mobility = 6 * n - sum(6 - min(j.joint_class, 6) for j in joints) - sum(c["equations"] for c in constraint_rows)
+    prescribed = list(model.prescribed)
+    params = model.parameter_symbols
+    p = [model.parameters[s.name] for s in params]
+    states = random_states(model, 3, seed=7)
+    A_fn = compile_matrix(model.constraint_jacobian, model.t, model.q, model.u, params)
+    hol = [i for i, c in enumerate(kin.constraints) if c.kind == "holonomic"]
+    rank = max(_rank(A_fn(t, q, u, p)) for t, q, u in states)
+    hol_rank = max(_rank(A_fn(t, q, u, p)[hol, :]) for t, q, u in states) if hol else 0
+    nfree = len(model.q)
+    dof = nfree - rank
+    eq = model.equations("lagrange")
+    M_fn = compile_matrix(eq.M, model.t, model.q, model.u, params)
+    massless = []
+    notes = []
+    if nfree:
+        Ms = [M_fn(t, q, u, p) for t, q, u in states]
+        massless = [c for i, c in enumerate(model.coordinates)
+                    if all(abs(M[i, i]) <= 1e-12 * max(1.0, float(np.max(np.abs(M)))) for M in Ms)]
+        if _rank(Ms[0]) < nfree:
+            notes.append("the mass matrix is singular (massless coordinates need condensation or constraints)")
+    dof_formula = mobility - len(prescribed)
+    redundant = max(0, len(kin.constraints) - rank)
+    if dof != dof_formula:
+        notes.append(f"the mobility formula gives {dof_formula} but the constraint Jacobian's rank gives {dof}: "
+                     "the formula counts dependent constraint equations (e.g. spatial counting of a planar loop)")
+    return Info(
+        name=model.name, moving_links=n, joints=joints, constraints=constraint_rows, mobility=mobility,
+        prescribed=prescribed, dof_formula=dof_formula, free_coordinates=list(model.coordinates),
+        constraint_rank=rank, holonomic_rank=hol_rank, dof=dof, configuration_dof=nfree - hol_rank,
+        redundant_constraints=redundant, holonomic=model.is_holonomic, rheonomic=model.is_rheonomic,
+        autonomous=model.is_autonomous(), cyclic=model.cyclic_coordinates(), massless_coordinates=massless,
+        notes=notes)

@@ -1,0 +1,1 @@
+"""Numeric callables from the symbolic model (common-subexpression elimination, then numpy)."""

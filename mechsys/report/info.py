@@ -1,0 +1,65 @@
+"""Render the `info` facts as a rich table, Markdown or JSON."""
+from __future__ import annotations
+
+import json
+
+from mechsys.analysis.info import Info
+
+
+def render_json(info: Info) -> str:
+    return json.dumps(info.to_dict(), indent=2) + "\n"
+
+
+def _facts(info: Info) -> list[tuple[str, str]]:
+    return [
+        ("moving links n", str(info.moving_links)),
+        ("mobility MO = 6n - sum(6-c)p_c", str(info.mobility)),
+        ("prescribed coordinates L", ", ".join(info.prescribed) or "0"),
+        ("DOF by formula M = MO - L", str(info.dof_formula)),
+        ("free coordinates", ", ".join(info.free_coordinates) or "none"),
+        ("constraint equations / rank", f"{sum(c['equations'] for c in info.constraints)} / {info.constraint_rank}"),
+        ("DOF (independent velocities)", str(info.dof)),
+        ("configuration DOF", str(info.configuration_dof)),
+        ("redundant constraints", str(info.redundant_constraints)),
+        ("system class", info.system_class),
+        ("cyclic coordinates", ", ".join(info.cyclic) or "none"),
+        ("massless coordinates", ", ".join(info.massless_coordinates) or "none"),
+    ]
+
+
+def render_markdown(info: Info) -> str:
+    out = [f"# {info.name}", "", "| link | parent | joint | coordinates | class c | reactions |", "|---|---|---|---|---|---|"]
+    for j in info.joints:
+        out.append(f"| {j.link} | {j.parent} | {j.type} | {', '.join(j.coordinates) or '-'} | {j.joint_class} "
+                   f"| {j.reactions} |")
+    out += ["", "| fact | value |", "|---|---|"]
+    out += [f"| {k} | {v} |" for k, v in _facts(info)]
+    out += [""] + [f"- note: {n}" for n in info.notes]
+    return "\n".join(out) + "\n"
+
+
+def render_rich(info: Info):  # -> rich renderable
+    from rich.console import Group
+    from rich.table import Table
+
+    joints = Table(title=f"{info.name}: links and joints")
+    for col in ("link", "parent", "joint", "coordinates", "class c", "reactions"):
+        joints.add_column(col)
+    for j in info.joints:
+        joints.add_row(j.link, j.parent, j.type, ", ".join(j.coordinates) or "-", str(j.joint_class),
+                       str(j.reactions))
+    facts = Table(show_header=False, title="facts")
+    facts.add_column("fact", style="bold")
+    facts.add_column("value")
+    for k, v in _facts(info):
+        facts.add_row(k, v)
+    parts = [joints, facts]
+    if info.constraints:
+        cons = Table(title="extra constraints")
+        cons.add_column("type")
+        cons.add_column("equations")
+        for c in info.constraints:
+            cons.add_row(c["type"], str(c["equations"]))
+        parts.insert(1, cons)
+    parts += [f"note: {n}" for n in info.notes]
+    return Group(*parts)
