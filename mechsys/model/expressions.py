@@ -243,7 +243,7 @@ def parse_expression(
     if isinstance(text, float):
         if text != text or text in (float("inf"), float("-inf")):
             raise ExpressionError("number must be finite")
-        return sp.Float(text)
+        return sp.Rational(repr(text))  # the decimal as written (0.2 -> 1/5), exact
     if not isinstance(text, str):
         raise ExpressionError(f"expected a number or an expression, got {type(text).__name__}")
     if len(text) > _MAX_LENGTH:

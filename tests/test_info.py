@@ -1,0 +1,63 @@
+"""`info`: DOF of every bundled system, mobility counting (Krodkiewski eq. 1.8, Fig. 8), system classes."""
+from pathlib import Path
+
+import pytest
+
+import mechsys
+from mechsys.analysis.info import system_info
+
+ROOT = Path(__file__).resolve().parents[1]
+
+# (file, DOF = independent velocities, configuration DOF, prescribed count)
+EXPECTED = [
+    ("centrifuge", 2, 2, 0),
+    ("gyrostabilizer", 2, 2, 1),
+    ("indicator", 1, 1, 2),
+    ("problem57", 1, 1, 0),
+    ("motor_arm", 2, 2, 0),
+    ("double_pendulum", 2, 2, 0),
+    ("cart_pendulum", 2, 2, 0),
+    ("spring_chain", 3, 3, 0),
+    ("slider_crank", 1, 1, 0),
+    ("four_bar", 1, 1, 0),
+    ("rolling_disk", 3, 5, 0),
+    ("wheel_on_axle", 1, 1, 2),
+]
+
+
+def test_every_bundled_system_is_listed_here():
+    bundled = {p.stem for p in (ROOT / "systems").glob("*.yaml")}
+    assert {name for name, *_ in EXPECTED} <= bundled
+
+
+@pytest.mark.parametrize("name, dof, config_dof, prescribed", EXPECTED, ids=[e[0] for e in EXPECTED])
+def test_dof_of_bundled_systems(name, dof, config_dof, prescribed):
+    info = system_info(mechsys.load(ROOT / "systems" / f"{name}.yaml"))
+    assert info.dof == dof
+    assert info.configuration_dof == config_dof
+    assert len(info.prescribed) == prescribed
+    assert info.dof_formula == info.dof  # Grübler-Kutzbach count agrees with the constraint rank
+
+
+def test_krodkiewski_fig8_mobility_is_5():
+    info = system_info(mechsys.load(ROOT / "tests" / "data" / "fig8_mobility.yaml"))
+    assert sorted(j.joint_class for j in info.joints) == [2, 3]
+    assert info.mobility == 5 and info.dof == 5
+
+
+def test_classes_of_textbook_systems():
+    ind = system_info(mechsys.load(ROOT / "systems" / "indicator.yaml"))
+    assert ind.rheonomic and ind.autonomous and ind.holonomic  # constant prescribed rates: autonomous EOM
+    disk = system_info(mechsys.load(ROOT / "systems" / "rolling_disk.yaml"))
+    assert not disk.holonomic
+    cen = system_info(mechsys.load(ROOT / "systems" / "centrifuge.yaml"))
+    assert cen.cyclic == ["alpha"] and cen.system_class == "holonomic, scleronomic, autonomous"
+
+
+def test_redundant_constraint_is_detected(tmp_path):
+    text = (ROOT / "systems" / "centrifuge.yaml").read_text()
+    text += "constraints:\n  - {type: holonomic, expression: beta - 0.1}\n  - {type: holonomic, expression: 2*beta - 0.2}\n"
+    path = tmp_path / "redundant.yaml"
+    path.write_text(text)
+    info = system_info(mechsys.load(path))
+    assert info.constraint_rank == 1 and info.redundant_constraints == 1 and info.dof == 1
