@@ -215,10 +215,12 @@ class Builder:
             self.kin.joints.append(JointInfo(name, j.parent, j.type, coords, jclass))
 
     def rotate(self, f: FrameState, axis: sp.Matrix, angle: sp.Expr) -> FrameState:
-        return f.rotated(axis, angle, self.rate_of(angle))
+        rate = self.rate_of(angle)
+        return f.rotated(axis, angle, rate, self.rate_of(rate))
 
     def move(self, f: FrameState, offset: sp.Matrix) -> FrameState:
-        return f.translated(offset, self.rate_of(offset))
+        rate = self.rate_of(offset)
+        return f.translated(offset, rate, self.rate_of(rate))
 
     def joint_motion(self, f: FrameState, j: Any, names: list[str], jp: Path) -> FrameState:
         q = [self.coord_expr(n) for n in names]

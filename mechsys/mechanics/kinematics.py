@@ -47,54 +47,67 @@ class FrameState:
     rotations then adds angles instead of multiplying matrices, which keeps planar chains at
     cos(q1 + q2 + ...) instead of products of sines and cosines.
 
-    Velocities are propagated recursively, as in the textbook: ``omega`` is the angular velocity in frame
-    components, and ``v`` the origin velocity in *home* components, which are ground axes while the frame is
-    pure and the frame's own axes otherwise. So a cyclic coordinate such as the centrifuge's alpha never
-    appears in T; nothing has to be simplified away.
+    Velocities and accelerations are propagated recursively, as in the textbook (no differentiation of long
+    expressions): ``omega``/``alpha`` are the angular velocity and the q''-free part of the angular
+    acceleration in frame components; ``v``/``a`` the origin velocity and q''-free acceleration in *home*
+    components, which are ground axes while the frame is pure and the frame's own axes otherwise. So a cyclic
+    coordinate such as the centrifuge's alpha never appears in T; nothing has to be simplified away.
     """
 
     R: sp.Matrix
     origin: sp.Matrix
     omega: sp.Matrix
+    alpha: sp.Matrix
     v: sp.Matrix
+    a: sp.Matrix
     pure: bool = True
     pure_axis: tuple | None = None
     pure_angle: sp.Expr = sp.Integer(0)
-    v_own: sp.Matrix | None = None  # origin velocity in own axes, kept for pure frames
+    v_own: sp.Matrix | None = None  # origin velocity and acceleration in own axes, kept for pure frames
+    a_own: sp.Matrix | None = None
 
     @staticmethod
     def ground() -> "FrameState":
-        return FrameState(sp.eye(3), sp.zeros(3, 1), sp.zeros(3, 1), sp.zeros(3, 1), v_own=sp.zeros(3, 1))
+        z = sp.zeros(3, 1)
+        return FrameState(sp.eye(3), z, z, z, z, z, v_own=z, a_own=z)
 
-    def rotated(self, axis: sp.Matrix, angle: sp.Expr, angle_rate: sp.Expr) -> "FrameState":
-        """This frame turned by ``angle`` about its own ``axis`` (a unit vector in this frame's axes)."""
+    def rotated(self, axis: sp.Matrix, angle: sp.Expr, rate: sp.Expr, accel0: sp.Expr) -> "FrameState":
+        """This frame turned by ``angle`` about its own ``axis`` (a unit vector in this frame's axes);
+        ``rate`` is the angle's rate and ``accel0`` the q''-free part of its second derivative."""
         key = tuple(axis)
         R_rel = rotation(axis, angle)
-        omega = R_rel.T * self.omega + axis * angle_rate  # the axis is invariant under its own rotation
+        carried = R_rel.T * self.omega
+        omega = carried + axis * rate  # the axis is invariant under its own rotation
+        alpha = R_rel.T * self.alpha + axis * accel0 + carried.cross(axis * rate)
         if self.pure:
-            v_own = R_rel.T * self.v_own
+            v_own, a_own = R_rel.T * self.v_own, R_rel.T * self.a_own
+            merged = None
             if self.pure_axis is None:
-                return FrameState(R_rel, self.origin, omega, self.v, True, key, angle, v_own)
-            if key == self.pure_axis:
-                total = self.pure_angle + angle
-                return FrameState(rotation(axis, total), self.origin, omega, self.v, True, key, total, v_own)
-            if tuple(-e for e in key) == self.pure_axis:
+                merged = (R_rel, key, angle)
+            elif key == self.pure_axis:
+                merged = (rotation(axis, self.pure_angle + angle), key, self.pure_angle + angle)
+            elif tuple(-e for e in key) == self.pure_axis:
                 total = self.pure_angle - angle
-                return FrameState(rotation(sp.Matrix(self.pure_axis), total), self.origin, omega, self.v, True,
-                                  self.pure_axis, total, v_own)
-            return FrameState(self.R * R_rel, self.origin, omega, v_own, False)
-        return FrameState(self.R * R_rel, self.origin, omega, R_rel.T * self.v, False)
+                merged = (rotation(sp.Matrix(self.pure_axis), total), self.pure_axis, total)
+            if merged is not None:
+                R, pure_axis, total = merged
+                return FrameState(R, self.origin, omega, alpha, self.v, self.a, True, pure_axis, total, v_own, a_own)
+            return FrameState(self.R * R_rel, self.origin, omega, alpha, v_own, a_own, False)
+        return FrameState(self.R * R_rel, self.origin, omega, alpha, R_rel.T * self.v, R_rel.T * self.a, False)
 
-    def translated(self, offset: sp.Matrix, offset_rate: sp.Matrix) -> "FrameState":
-        """This frame moved by ``offset`` given in its own axes (``offset_rate``: its time derivative)."""
-        v_own = None
+    def translated(self, offset: sp.Matrix, rate: sp.Matrix, accel0: sp.Matrix) -> "FrameState":
+        """This frame moved by ``offset`` given in its own axes (``rate``, ``accel0``: its derivatives)."""
+        v_own = a_own = None
         if self.pure:
-            v = self.v + self.omega_home.cross(self.R * offset) + self.R * offset_rate
-            v_own = self.v_own + self.omega.cross(offset) + offset_rate
+            w, al = self.R * self.omega, self.R * self.alpha
+            d, dd, ddd = self.R * offset, self.R * rate, self.R * accel0
+            v = self.v + w.cross(d) + dd
+            a = self.a + al.cross(d) + w.cross(w.cross(d)) + 2 * w.cross(dd) + ddd
+            v_own, a_own = _moved(self.v_own, self.a_own, self.omega, self.alpha, offset, rate, accel0)
         else:
-            v = self.v + self.omega.cross(offset) + offset_rate
-        return FrameState(self.R, self.origin + self.R * offset, self.omega, v, self.pure, self.pure_axis,
-                          self.pure_angle, v_own)
+            v, a = _moved(self.v, self.a, self.omega, self.alpha, offset, rate, accel0)
+        return FrameState(self.R, self.origin + self.R * offset, self.omega, self.alpha, v, a, self.pure,
+                          self.pure_axis, self.pure_angle, v_own, a_own)
 
     def point(self, local: sp.Matrix) -> sp.Matrix:
         """Ground position of a point fixed in this frame."""
@@ -121,6 +134,20 @@ class FrameState:
         arm = self.R * local if self.pure else local
         return self.v + self.omega_home.cross(arm)
 
+    def point_acceleration(self, local: sp.Matrix) -> sp.Matrix:
+        """The q''-free part of the acceleration (home components) of a point fixed in this frame."""
+        if self.pure:
+            w, al, arm = self.R * self.omega, self.R * self.alpha, self.R * local
+        else:
+            w, al, arm = self.omega, self.alpha, local
+        return self.a + al.cross(arm) + w.cross(w.cross(arm))
+
+
+def _moved(v: sp.Matrix, a: sp.Matrix, w: sp.Matrix, al: sp.Matrix, d: sp.Matrix, dd: sp.Matrix,
+           ddd: sp.Matrix) -> tuple[sp.Matrix, sp.Matrix]:
+    """Velocity and acceleration of a point at offset d (moving with rate dd) from an origin, in rotating axes."""
+    return v + w.cross(d) + dd, a + al.cross(d) + w.cross(w.cross(d)) + 2 * w.cross(dd) + ddd
+
 
 def time_derivative(expr: sp.Expr | sp.Matrix, coords: Sequence[sp.Symbol], rates: Sequence[sp.Symbol],
                     t: sp.Symbol, accels: Sequence[sp.Symbol] | None = None) -> sp.Expr | sp.Matrix:
@@ -132,3 +159,16 @@ def time_derivative(expr: sp.Expr | sp.Matrix, coords: Sequence[sp.Symbol], rate
         for u, a in zip(rates, accels):
             out = out + sp.diff(expr, u) * a
     return out
+
+
+def rate_coefficients(expr: sp.Matrix, rates: Sequence[sp.Symbol]) -> sp.Matrix:
+    """Jacobian of ``expr`` (linear in ``rates``) with respect to the rates, by substitution, not differentiation:
+    column j is expr(u_j = 1, other rates 0) - expr(all rates 0). Exact for linear expressions and far cheaper
+    than diff on the long nested sums of a chain (partial velocities of Kane's method)."""
+    expr = sp.Matrix(expr)
+    zero = {u: 0 for u in rates}
+    base = expr.xreplace(zero)
+    cols = []
+    for u in rates:
+        cols.append(expr.xreplace({**zero, u: 1}) - base)
+    return sp.Matrix.hstack(*cols) if cols else sp.zeros(expr.shape[0], 0)

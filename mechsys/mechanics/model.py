@@ -7,7 +7,7 @@ from functools import cached_property
 import sympy as sp
 
 from mechsys.mechanics.build import Body, Builder, Kinematics
-from mechsys.mechanics.kinematics import FrameState, time_derivative
+from mechsys.mechanics.kinematics import FrameState, rate_coefficients, time_derivative
 from mechsys.model.load import T as TIME
 from mechsys.model.load import Document
 
@@ -87,6 +87,15 @@ class MechanicalModel:
             out.append((b, self.com(b), frame.point_velocity(b.com_local), frame.omega, frame))
         return out
 
+    def partials(self, expr: sp.Matrix) -> sp.Matrix:
+        """Coefficients of the rates in an expression linear in them (partial velocities)."""
+        return rate_coefficients(expr, self.u)
+
+    @cached_property
+    def _body_partials(self) -> list[tuple[sp.Matrix, sp.Matrix]]:
+        """Partial velocities of each body's centre of mass (home axes) and angular velocity (body axes)."""
+        return [(self.partials(v), self.partials(w)) for _b, _r, v, w, _f in self._body_kinematics]
+
     # ------------------------------------------------------------------------------------- energies
     @cached_property
     def kinetic_energy(self) -> sp.Expr:
@@ -127,14 +136,18 @@ class MechanicalModel:
     @cached_property
     def generalized_forces(self) -> sp.Matrix:
         """Generalized forces not derived from V, by virtual power: Q_i = sum F . dv/d(der(q_i))."""
+        return self.nonconservative_forces(self.kin.loads)
+
+    def nonconservative_forces(self, loads: list) -> sp.Matrix:
+        """Generalized forces of the given loads' non-potential parts."""
         n = len(self.q)
         Q = sp.zeros(n, 1)
-        for load in self.kin.loads:
+        for load in loads:
             d = load.data
             if load.kind == "force":
-                Q += d["v"].jacobian(self.u).T * d["F"] if n else sp.zeros(0, 1)
+                Q += self.partials(d["v"]).T * d["F"] if n else sp.zeros(0, 1)
             elif load.kind == "torque":
-                Q += d["w"].jacobian(self.u).T * d["M"] if n else sp.zeros(0, 1)
+                Q += self.partials(d["w"]).T * d["M"] if n else sp.zeros(0, 1)
             elif load.kind in ("damper", "actuator"):
                 length = sp.sqrt((d["d"].T * d["d"])[0])
                 dl = sp.Matrix([sp.diff(length, q) for q in self.q])
@@ -158,9 +171,9 @@ class MechanicalModel:
         Qc = sp.zeros(n, 1)
         for load in self.kin.loads:
             if load.kind == "gravity":
-                for b, _r, v, _w, frame in self._body_kinematics:
+                for (b, _r, _v, _w, frame), (Jv, _Jw) in zip(self._body_kinematics, self._body_partials):
                     if b.mass != 0 and n:
-                        Qc += v.jacobian(self.u).T * (b.mass * frame.to_home(load.data["g"]))
+                        Qc += Jv.T * (b.mass * frame.to_home(load.data["g"]))
             else:
                 V = self._elastic_potential(load.kind, load.data)
                 if V != 0:
@@ -177,7 +190,7 @@ class MechanicalModel:
     def constraint_jacobian(self) -> sp.Matrix:
         if not self.kin.constraints:
             return sp.zeros(0, len(self.q))
-        return self.constraint_velocity.jacobian(self.u)
+        return self.partials(self.constraint_velocity)
 
     @cached_property
     def constraint_rhs(self) -> sp.Matrix:
@@ -204,16 +217,25 @@ class MechanicalModel:
         return self._eqs[method]
 
     def _lagrange(self) -> tuple[sp.Matrix, sp.Matrix]:
-        """d/dt(dT/du) - dT/dq + dV/dq = Q, expanded by the chain rule: M = d2T/du2, f = the rest."""
+        """d/dt(dT/du) - dT/dq + dV/dq = Q. With T = u.M.u/2 + b.u + T0: M = d2T/du2, b = dT/du at u = 0, and
+        d/dt(dT/du) = M q'' + (dM/dt) u + db/dt, so f = Q - dV/dq + dT/dq - (dM/dt) u - db/dt."""
         T, V, Q = self.kinetic_energy, self.potential_energy, self.generalized_forces
         n = len(self.q)
+        zero_rates = {u: 0 for u in self.u}
         M = sp.zeros(n, n)
         f = sp.zeros(n, 1)
+        p = [sp.diff(T, u) for u in self.u]
         for i in range(n):
-            p = sp.diff(T, self.u[i])
-            for j in range(n):
-                M[i, j] = sp.diff(p, self.u[j]) if j >= i else M[j, i]
-            f[i] = Q[i] - sp.diff(V, self.q[i]) + sp.diff(T, self.q[i]) - self.dt(p)
+            for j in range(i, n):
+                M[i, j] = M[j, i] = sp.diff(p[i], self.u[j])
+        Mdot = sp.zeros(n, n)
+        for i in range(n):
+            for j in range(i, n):
+                Mdot[i, j] = Mdot[j, i] = self.dt(M[i, j])
+        for i in range(n):
+            b = p[i].xreplace(zero_rates)
+            f[i] = (Q[i] - sp.diff(V, self.q[i]) + sp.diff(T, self.q[i])
+                    - sum((Mdot[i, j] * self.u[j] for j in range(n)), sp.Integer(0)) - self.dt(b))
         return M, f
 
     def _kane(self) -> tuple[sp.Matrix, sp.Matrix]:
@@ -221,20 +243,15 @@ class MechanicalModel:
         n = len(self.q)
         M = sp.zeros(n, n)
         f = self.generalized_forces + self._potential_force_kane()
-        for b, _r, v, w, frame in self._body_kinematics:
-            Jv = v.jacobian(self.u)
-            a0 = self.dt(v)  # acceleration of G with q'' = 0, in home axes
-            if not frame.pure:
-                a0 = a0 + w.cross(v)  # home axes rotate with the body: add omega x v
+        for (b, _r, v, w, frame), (Jv, Jw) in zip(self._body_kinematics, self._body_partials):
+            a0 = frame.point_acceleration(b.com_local)  # acceleration of G with q'' = 0, home axes
             if b.mass != 0:
                 M += b.mass * Jv.T * Jv
                 f -= b.mass * Jv.T * a0
             if not b.particle and b.inertia != sp.zeros(3, 3):
-                Jw = w.jacobian(self.u)
                 I = b.inertia
-                alpha0 = self.dt(w)  # body-axes components: d/dt in the body equals the inertial rate
                 M += Jw.T * I * Jw
-                f -= Jw.T * (I * alpha0 + w.cross(I * w))
+                f -= Jw.T * (I * frame.alpha + w.cross(I * w))  # Euler's equations in body axes
         return M, f
 
     # ------------------------------------------------------------------------------------- classification

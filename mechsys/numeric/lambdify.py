@@ -29,5 +29,10 @@ def compile_matrix(expr: sp.Matrix, t: sp.Symbol, q: Sequence[sp.Symbol], u: Seq
     args = [t, *q, *u, *params]
     if expr.shape[0] == 0 or expr.shape[1] == 0:
         return StateFunction(expr.shape, lambda *a: None)
-    fn = sp.lambdify(args, expr, modules="numpy", cse=True)
+    fn = sp.lambdify(args, expr, modules="numpy", cse=_cse)
     return StateFunction(expr.shape, fn)
+
+
+def _cse(exprs):
+    """Common-subexpression elimination without canonical ordering (much faster on long expressions)."""
+    return sp.cse(exprs, order="none")
