@@ -427,3 +427,21 @@ def test_four_bar_static_crank_torque_by_virtual_work(method, rng):
         h = 1e-5
         book = (potential(th2 + h) - potential(th2 - h)) / (2 * h)
         assert_close(_static_crank_torque(model, method, config), book, 1e-7, 1e-10, what="M2")
+
+
+# ------------------------------------------------------------------------------------------ autonomy (ch. 1, 6, 7)
+@pytest.mark.parametrize("method", METHODS)
+@pytest.mark.parametrize("name", ["gyrostabilizer", "indicator", "wheel_on_axle"])
+def test_constant_spin_rotors_give_autonomous_eom_krodkiewski(name, method, rng):
+    """Part-2 digest §1.7 (and (1.55), (6.23), (7.8)): a prescribed CONSTANT spin Omega*t (and platform rate
+    omega1*t) is rheonomic, but the EOM contain only the rates, never the angles, so they are autonomous.
+    First the derivation: d(residual)/dt = 0 at random states; then the model's classification."""
+    model = load_system(name)
+    res = model.equations(method).residual()
+    d_dt = res.diff(model.t)
+    for _ in range(3):
+        pt = random_point(model, rng, randomize_parameters=True)
+        scale = max(1.0, float(np.max(np.abs(evaluate(res, model, point=pt)))))
+        assert np.max(np.abs(evaluate(d_dt, model, point=pt))) <= 1e-9 * scale
+    assert model.is_rheonomic
+    assert model.is_autonomous(method), f"{name} [{method}]: EOM reported non-autonomous"

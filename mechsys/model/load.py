@@ -165,6 +165,9 @@ def _clean_loc(loc: tuple, data: Any) -> tuple:
     out: list = []
     value = data
     for part in loc:
+        if part == "[key]":
+            out.append(part)
+            break
         if isinstance(value, dict) and part not in value and isinstance(part, str) and (
             value.get("type") == part or part in ("str", "int", "float", "list[...]", "function-after")
             or re.match(r"^(list|dict|literal|union)\[", part) or part.startswith("lax-")):
@@ -227,12 +230,20 @@ def _pydantic_to_input_error(exc: pydantic.ValidationError, data: Any, pos: Posi
         tag = ctx.get("tag")
         if kind == "union_tag_not_found":
             line, col = pos.lookup(loc)
-            return InputError(f"missing 'type' (one of {expected})", file, line, col, dotted(loc))
+            return InputError("missing 'type'", file, line, col, dotted(loc))
         options = [s.strip().strip("'") for s in str(expected).split(",")]
         hint = difflib.get_close_matches(str(tag), options, n=1)
         extra = f" (did you mean {hint[0]!r}?)" if hint else f" (one of {expected})"
         line, col = pos.lookup(loc + ("type",))
         return InputError(f"unknown type {tag!r}{extra}", file, line, col, dotted(loc + ("type",)))
+    if "[key]" in loc:
+        key_path = loc[:loc.index("[key]")]
+        line, col = pos.lookup(key_path, key=True)
+        return InputError(f"invalid name {key_path[-1]!r}: use letters, digits and '_', not starting with a digit",
+                          file, line, col, dotted(key_path))
+    if kind == "value_error":
+        line, col = pos.lookup(loc)
+        return InputError(err["msg"].removeprefix("Value error, "), file, line, col, dotted(loc))
     message = _TYPE_WORDS.get(kind, err["msg"])
     if kind == "literal_error":
         message = f"{err['msg'].replace('Input should be', 'expected')}"

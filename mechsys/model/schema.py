@@ -3,9 +3,18 @@ from __future__ import annotations
 
 from typing import Annotated, Literal, Union
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, field_validator
 
-Expr = Union[int, float, str]
+
+def _expr(value: object) -> object:
+    if isinstance(value, bool) or not isinstance(value, (int, float, str)):
+        kind = {type(None): "nothing (null)", bool: "a boolean", list: "a list", dict: "a mapping"}.get(
+            type(value), type(value).__name__)
+        raise ValueError(f"expected a number or an expression, got {kind}")
+    return value
+
+
+Expr = Annotated[Union[int, float, str], BeforeValidator(_expr)]
 """A number or an expression string (parameters, coordinates, der(q), t; see docs/yaml-reference.md)."""
 Vec3 = Annotated[list[Expr], Field(min_length=3, max_length=3)]
 AxisName = Literal["x", "y", "z", "-x", "-y", "-z"]
