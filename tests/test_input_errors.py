@@ -242,6 +242,11 @@ CASES: list[Case] = [
          "  - column", None, "links", "expected a mapping"),
     Case("coordinate-initial-as-mapping", sub("    initial: 0\n    rate: -2.5", "    initial: {x: 1}\n    rate: -2.5"),
          "initial: {x: 1}", "{x: 1}", "coordinates.beta.initial", "number or an expression"),
+    Case("name-as-list", sub("name: centrifuge_test", "name: [a, b]"), "name: [a, b]", "[a, b]", "name",
+         ("string", "text")),
+    Case("yaml-binary-value", sub("description: Column driven by a DC motor carrying a hinged arm, with a spring",
+                                  "description: !!binary aGVsbG8="), "!!binary", None, "description",
+         "unsupported YAML value"),
     Case("particle-not-boolean", sub("    mass: m\n", "    mass: m\n    particle: maybe\n"), "particle: maybe",
          "maybe", "links.arm.particle", "true or false"),
     Case("joint-as-string", sub(ARM_JOINT, "    joint: revolute\n"),
@@ -255,7 +260,7 @@ CASES: list[Case] = [
     Case("unknown-force-type-gravty", sub("type: gravity", "type: gravty"), "type: gravty", "gravty",
          "forces[0].type", "did you mean 'gravity'"),
     Case("force-without-type", sub("  - type: gravity\n    acceleration", "  - acceleration"),
-         "  - acceleration", None, "forces[0]", "type"),
+         "  - acceleration", None, "forces[0]", "'gravity'"),  # the message lists the allowed types
     Case("unknown-axis-name", sub("      axis: x\n", "      axis: w\n"), "axis: w", "w", "links.arm.joint.axis",
          "expected"),
     # ------------------------------------------------------------------ missing required keys
@@ -561,11 +566,11 @@ def test_valid_set_is_accepted(tmp_path: Path, runner: CliRunner) -> None:
 
 
 # ----------------------------------------------------------------------------------------- real processes
-def run_cli(args: list[str], cwd: Path) -> subprocess.CompletedProcess:
+def run_cli(args: list[str], cwd: Path, timeout: float = 120) -> subprocess.CompletedProcess:
     env = {k: v for k, v in os.environ.items() if k != "MECHSYS_DEBUG"}
     env["PYTHONPATH"] = str(ROOT) + os.pathsep + env.get("PYTHONPATH", "")
     return subprocess.run([sys.executable, "-m", "mechsys", *args], cwd=cwd, env=env, capture_output=True,
-                          text=True, timeout=120)
+                          text=True, timeout=timeout)
 
 
 SUBPROCESS_CASES = ["yaml-tab-indent", "unknown-top-level-paramters", "security-import-os-system",
@@ -583,6 +588,27 @@ def test_subprocess_no_traceback(case_id: str, tmp_path: Path) -> None:
     line_out = assert_one_line_error(None, stdout=proc.stdout, stderr=proc.stderr, code=proc.returncode)
     check_positioned(case, path, text, line_out)
     assert not marker.exists()
+
+
+HUGE = [
+    ("power-tower-in-mass", "    mass: m\n", "    mass: 9**9**9\n", "links.arm.mass"),
+    ("power-tower-caret-in-parameter", "  k: 100\n", "  k: 10^10^10\n", "parameters.k"),
+    ("nested-exp-in-parameter", "  k: 100\n", "  k: exp(exp(exp(100)))\n", "parameters.k"),
+]
+HUGE_TIMEOUT = 8
+
+
+@pytest.mark.parametrize("old,new,key", [h[1:] for h in HUGE], ids=[h[0] for h in HUGE])
+def test_subprocess_huge_numbers_fail_fast(old: str, new: str, key: str, tmp_path: Path) -> None:
+    """Absurdly large numbers are invalid input: exit 2 promptly, not a hang computing a 10**9-digit integer."""
+    path = tmp_path / "model.yaml"
+    path.write_text(sub(old, new)(BASE), encoding="utf-8")
+    try:
+        proc = run_cli(["derive", str(path)], tmp_path, timeout=HUGE_TIMEOUT)
+    except subprocess.TimeoutExpired:
+        pytest.fail(f"`mechsys derive` did not finish within {HUGE_TIMEOUT} s for {new.strip()!r}")
+    line_out = assert_one_line_error(None, stdout=proc.stdout, stderr=proc.stderr, code=proc.returncode)
+    assert f": {key}: " in line_out, line_out
 
 
 def test_subprocess_tmp_pwned_not_created(tmp_path: Path) -> None:

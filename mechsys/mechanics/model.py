@@ -268,8 +268,28 @@ class MechanicalModel:
         return any(self.t in sp.sympify(e).free_symbols for e in exprs)
 
     def is_autonomous(self, method: str = "lagrange") -> bool:
+        """No explicit t in M, f, A, b. Decided symbolically when t is absent, else by d/dt = 0 at random states
+        (constant prescribed spins leave cos(W t)**2 + sin(W t)**2, which is never simplified on this path)."""
         eq = self.equations(method)
-        return all(self.t not in sp.sympify(m).free_symbols for m in (eq.M, eq.f, eq.A, eq.b))
+        parts = [m for m in (eq.M, eq.f, eq.A, eq.b) if m.shape[0] and self.t in sp.sympify(m).free_symbols]
+        if not parts:
+            return True
+        import numpy as np
+
+        from mechsys.numeric.lambdify import compile_matrix
+
+        params = self.parameter_symbols
+        p = [self.parameters[s.name] for s in params]
+        rng = np.random.default_rng(5)
+        for part in parts:
+            value = compile_matrix(part, self.t, self.q, self.u, params)
+            rate = compile_matrix(part.diff(self.t), self.t, self.q, self.u, params)
+            for _ in range(4):
+                t, q, u = rng.uniform(0, 10), rng.uniform(-3, 3, len(self.q)), rng.uniform(-3, 3, len(self.q))
+                scale = max(1.0, float(np.max(np.abs(value(t, q, u, p)))))
+                if np.max(np.abs(rate(t, q, u, p))) > 1e-9 * scale:
+                    return False
+        return True
 
     def cyclic_coordinates(self, method: str = "lagrange") -> list[str]:
         eq = self.equations(method)
