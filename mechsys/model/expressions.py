@@ -157,8 +157,10 @@ class _Parser:
     def power(self) -> sp.Expr:
         base = self.atom()
         if self.peek().text in ("**", "^"):
-            self.take()
+            op = self.take()
             exponent = self.unary()  # right associative, allows 2**-1
+            if base.is_number and exponent.is_number and _too_large(base, exponent):
+                raise ExpressionError("number too large", op.pos)
             return base**exponent
         return base
 
@@ -222,7 +224,27 @@ class _Parser:
             raise ExpressionError(f"{tok.text}() takes at least 2 arguments", tok.pos)
         if arity is not None and len(args) != arity:
             raise ExpressionError(f"{tok.text}() takes {arity} argument(s), got {len(args)}", tok.pos)
+        if tok.text in ("exp", "sinh", "cosh") and args[0].is_number:
+            try:
+                big = abs(float(sp.re(args[0]))) > 700
+            except (OverflowError, TypeError, ValueError):
+                big = True
+            if big:
+                raise ExpressionError("number too large", tok.pos)
         return fn(*args)
+
+
+def _too_large(base: sp.Expr, exponent: sp.Expr) -> bool:
+    """Would base**exponent be an astronomically large (slow to compute) number?"""
+    import math
+
+    try:
+        b, e = abs(complex(base)), abs(complex(exponent))
+    except (OverflowError, TypeError, ValueError):
+        return True
+    if e > 1e6 or b > 1e300:
+        return True
+    return b > 1 and e * math.log10(b) > 1000
 
 
 def parse_expression(

@@ -229,8 +229,16 @@ def _pydantic_to_input_error(exc: pydantic.ValidationError, data: Any, pos: Posi
         expected = ctx.get("expected_tags", "")
         tag = ctx.get("tag")
         if kind == "union_tag_not_found":
+            import typing
+
+            from mechsys.model import schema
+
+            union = {"forces": schema.ForceSpec, "constraints": schema.Constraint}.get(loc[0], schema.Joint)
+            tags = [typing.get_args(m.model_fields["type"].annotation)[0]
+                    for m in typing.get_args(typing.get_args(union)[0])]
             line, col = pos.lookup(loc)
-            return InputError("missing 'type'", file, line, col, dotted(loc))
+            return InputError(f"missing 'type' (one of {', '.join(repr(t) for t in tags)})", file, line, col,
+                              dotted(loc))
         options = [s.strip().strip("'") for s in str(expected).split(",")]
         hint = difflib.get_close_matches(str(tag), options, n=1)
         extra = f" (did you mean {hint[0]!r}?)" if hint else f" (one of {expected})"

@@ -88,7 +88,12 @@ dotted = _dotted
 
 def load_yaml(text: str, file: str) -> tuple[Any, PositionMap]:
     """Parse YAML text (safe subset, no tags that construct objects) into plain data and positions."""
-    loader = yaml.SafeLoader(text)
+    try:
+        loader = yaml.SafeLoader(text)
+    except yaml.reader.ReaderError as exc:
+        line = text.count("\n", 0, exc.position) + 1
+        col = exc.position - (text.rfind("\n", 0, exc.position) + 1) + 1
+        raise InputError(f"character {exc.character!r} is not allowed in YAML", file, line, col) from None
     try:
         node = loader.get_single_node()
         if node is None:
