@@ -268,7 +268,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--n", type=int, nargs="+", default=[5, 10, 20], help="chain lengths (default 5 10 20)")
     ap.add_argument("--quick", action="store_true", help="only n = 5 and 10")
     ap.add_argument("--repeat", type=int, default=1, help="fresh-process runs per pipeline; median reported")
-    ap.add_argument("--method", choices=["kane", "lagrange"], default="kane", help="mechsys derivation method")
+    ap.add_argument("--method", choices=["staged", "kane", "lagrange"], default="staged",
+                    help="mechsys pipeline: compiled per-body Kane terms (default, what analyses use) or the "
+                         "full symbolic M and f of a formulation, compiled whole")
     ap.add_argument("--baseline", choices=["both", "relative", "absolute"], default="both",
                     help="plain-sympy formulation(s): relative angles (as the YAML), absolute angles, or both")
     ap.add_argument("--timeout", type=float, default=120.0,

@@ -11,7 +11,7 @@ from typing import Sequence
 import numpy as np
 import sympy as sp
 
-from mechsys.numeric.lambdify import _cse
+from mechsys.numeric.lambdify import compile_exprs
 
 
 @dataclass
@@ -24,26 +24,26 @@ class CompiledEquations:
 
     def evaluate(self, t: float, q: Sequence[float], u: Sequence[float], p: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
         n = self.n
-        out = self._fn(t, *q, *u, *p)
-        f = np.array(out[0], dtype=float).reshape(n)  # Q + potential forces (gravity excluded)
+        out = np.asarray(self._fn(t, *q, *u, *p), dtype=float)
+        f = out[:n].copy()  # Q + potential forces (gravity excluded)
         M = np.zeros((n, n))
-        k = 1
+        k = n
         for has_mass, has_inertia in self.bodies:
             if has_mass:
-                Jv = np.array(out[k], dtype=float).reshape(3, n)
-                m = float(out[k + 1])
-                rhs = np.array(out[k + 2], dtype=float).reshape(3)  # m*g - m*a0
+                Jv = out[k:k + 3 * n].reshape(3, n)
+                m = out[k + 3 * n]
+                rhs = out[k + 3 * n + 1:k + 3 * n + 4]  # m*g - m*a0
                 M += m * Jv.T @ Jv
                 f += Jv.T @ rhs
-                k += 3
+                k += 3 * n + 4
             if has_inertia:
-                Jw = np.array(out[k], dtype=float).reshape(3, n)
-                I = np.array(out[k + 1], dtype=float).reshape(3, 3)
-                alpha = np.array(out[k + 2], dtype=float).reshape(3)
-                w = np.array(out[k + 3], dtype=float).reshape(3)
+                Jw = out[k:k + 3 * n].reshape(3, n)
+                I = out[k + 3 * n:k + 3 * n + 9].reshape(3, 3)
+                alpha = out[k + 3 * n + 9:k + 3 * n + 12]
+                w = out[k + 3 * n + 12:k + 3 * n + 15]
                 M += Jw.T @ I @ Jw
                 f -= Jw.T @ (I @ alpha + np.cross(w, I @ w))
-                k += 4
+                k += 3 * n + 15
         return M, f
 
 
@@ -57,7 +57,7 @@ def compile_equations(model) -> CompiledEquations:
             V = model._elastic_potential(load.kind, load.data)
             if V != 0:
                 other -= sp.Matrix([sp.diff(V, q) for q in model.q])
-    pieces.append(other)
+    pieces += list(other)
     gravity = [load.data["g"] for load in model.kin.loads if load.kind == "gravity"]
     layout = []
     for (b, _r, _v, w, frame), (Jv, Jw) in zip(model._body_kinematics, model._body_partials):
@@ -65,10 +65,9 @@ def compile_equations(model) -> CompiledEquations:
         has_inertia = not b.particle and b.inertia != sp.zeros(3, 3)
         if has_mass:
             g_home = sum((frame.to_home(g) for g in gravity), sp.zeros(3, 1))
-            pieces += [Jv, b.mass, b.mass * (g_home - frame.point_acceleration(b.com_local))]
+            pieces += [*Jv, b.mass, *(b.mass * (g_home - frame.point_acceleration(b.com_local)))]
         if has_inertia:
-            pieces += [Jw, b.inertia, frame.alpha, w]
+            pieces += [*Jw, *b.inertia, *frame.alpha, *w]
         layout.append((has_mass, has_inertia))
-    args = [model.t, *model.q, *model.u, *model.parameter_symbols]
-    fn = sp.lambdify(args, pieces, modules="numpy", cse=_cse)
+    fn = compile_exprs(pieces, [model.t, *model.q, *model.u, *model.parameter_symbols])
     return CompiledEquations(n, layout, fn)

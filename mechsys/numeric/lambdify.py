@@ -1,11 +1,46 @@
-"""Compile symbolic matrices to numpy callables of (t, q, u, p) with common-subexpression elimination."""
+"""Compile symbolic expressions to Python callables: common-subexpression elimination, then plain source code.
+
+sympy.lambdify walks the whole (unshared) expression tree several times to find symbols and functions, which
+dominates for the long expressions of a chain; here CSE runs once and only its small results are printed."""
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Callable, Sequence
 
 import numpy as np
 import sympy as sp
+from sympy.printing.pycode import PythonCodePrinter
+
+
+class _Printer(PythonCodePrinter):
+    """Python source with positional argument names a0, a1, ... for the input symbols."""
+
+    def __init__(self, names: dict[sp.Symbol, str]) -> None:
+        super().__init__({"fully_qualified_modules": True, "inline": True, "allow_unknown_functions": False})
+        self._names = names
+
+    def _print_Symbol(self, expr: sp.Symbol) -> str:
+        return self._names.get(expr) or super()._print_Symbol(expr)
+
+    _print_Dummy = _print_Symbol
+
+
+def compile_exprs(exprs: Sequence[sp.Expr], args: Sequence[sp.Symbol]) -> Callable[..., list[float]]:
+    """A function of ``args`` returning the list of ``exprs`` as floats (shared subexpressions computed once)."""
+    names = {a: f"a{i}" for i, a in enumerate(args)}
+    exprs = [sp.sympify(e) for e in exprs]
+    replacements, reduced = sp.cse(exprs, order="none")
+    for k, (sym, _) in enumerate(replacements):
+        names[sym] = f"x{k}"
+    printer = _Printer(names)
+    lines = [f"def _f({', '.join(names[a] for a in args)}):"]
+    lines += [f"    {names[sym]} = {printer.doprint(value)}" for sym, value in replacements]
+    lines.append("    return [" + ", ".join(printer.doprint(e) for e in reduced) + "]")
+    namespace: dict = {"math": math}
+    # The source is printed by sympy from expressions built by the whitelist parser: no user text reaches it.
+    exec(compile("\n".join(lines), "<mechsys-generated>", "exec"), namespace)  # noqa: S102
+    return namespace["_f"]
 
 
 @dataclass
@@ -13,7 +48,7 @@ class StateFunction:
     """``fn(t, q, u, p)`` evaluating a symbolic matrix at numeric arrays; shape is the matrix shape."""
 
     shape: tuple[int, int]
-    _fn: Callable[..., object]
+    _fn: Callable[..., list[float]]
 
     def __call__(self, t: float, q: Sequence[float], u: Sequence[float], p: Sequence[float]) -> np.ndarray:
         if self.shape[0] == 0 or self.shape[1] == 0:
@@ -24,15 +59,8 @@ class StateFunction:
 
 def compile_matrix(expr: sp.Matrix, t: sp.Symbol, q: Sequence[sp.Symbol], u: Sequence[sp.Symbol],
                    params: Sequence[sp.Symbol]) -> StateFunction:
-    """A numpy function of (t, q..., u..., p...) for ``expr`` (a Matrix); CSE is shared across entries."""
+    """A function of (t, q..., u..., p...) for ``expr`` (a Matrix), entries row by row."""
     expr = sp.Matrix(expr)
-    args = [t, *q, *u, *params]
     if expr.shape[0] == 0 or expr.shape[1] == 0:
-        return StateFunction(expr.shape, lambda *a: None)
-    fn = sp.lambdify(args, expr, modules="numpy", cse=_cse)
-    return StateFunction(expr.shape, fn)
-
-
-def _cse(exprs):
-    """Common-subexpression elimination without canonical ordering (much faster on long expressions)."""
-    return sp.cse(exprs, order="none")
+        return StateFunction(expr.shape, lambda *a: [])
+    return StateFunction(expr.shape, compile_exprs(list(expr), [t, *q, *u, *params]))
