@@ -151,6 +151,9 @@ class Builder:
     # ------------------------------------------------------------------------------------- links
     def build(self) -> Kinematics:
         self.build_links()
+        for name, c in self.doc.spec.coordinates.items():
+            if c.angle is not None:  # an explicit 'angle:' overrides what the joints imply
+                self.kin.angles[name] = c.angle
         self.build_bodies()
         self.build_constraints()
         self.build_loads()
@@ -298,6 +301,9 @@ class Builder:
     def build_bodies(self) -> None:
         for name, spec in self.doc.spec.links.items():
             lp: Path = ("links", name)
+            for reserved in ("com", "origin"):
+                if reserved in spec.points:
+                    raise self.doc.error(lp + ("points", reserved), f"{reserved!r} is a reserved point name", key=True)
             m = self.doc.parse(spec.mass, lp + ("mass",), "parameter")
             com = self.doc.parse_vec(spec.center_of_mass, lp + ("center_of_mass",), "parameter")
             if spec.particle and (spec.inertia is not None or spec.shape is not None):
@@ -376,7 +382,7 @@ class Builder:
                 fr = self.frame(c.frame, cp + ("frame",))
                 if c.type == "point_on_line":
                     d = self.axis(c.direction, cp + ("direction",))
-                    normals = _complement(d)
+                    normals = _complement(d, self.doc.numeric_parameters())
                 else:
                     normals = [self.axis(c.normal, cp + ("normal",))]
                 rows = []
@@ -409,11 +415,12 @@ class Builder:
             fp: Path = ("forces", i)
             data: dict[str, Any] = {}
             if f.type == "gravity":
-                data["g"] = doc.parse_vec(f.acceleration, fp + ("acceleration",), "force")
+                data["g"] = doc.parse_vec(f.acceleration, fp + ("acceleration",), "prescribed")
             elif f.type == "force":
                 frame, local = self.point_on(f.at, fp + ("at",))
                 force = self.frame(f.frame, fp + ("frame",)).R * doc.parse_vec(f.value, fp + ("value",), "force")
-                data["v"] = frame.point_velocity(local)
+                rate = self.rate_of(local)  # a point may slide along its link (coordinates in its position)
+                data["v"] = frame.point_velocity(local) + (frame.R * rate if frame.pure else rate)
                 data["F"] = frame.to_home(force)
             elif f.type == "torque":
                 on = self.frame(f.on, fp + ("on",))
@@ -450,6 +457,9 @@ class Builder:
                     options = list(doc.coords) + list(doc.prescribed)
                     raise doc.error(fp + ("coordinate",),
                                     f"unknown coordinate {f.coordinate!r}{doc.suggest(f.coordinate, options)}")
+                if f.type != "torsional_spring" and f.coordinate in doc.prescribed:
+                    raise doc.error(fp + ("coordinate",), f"coordinate {f.coordinate!r} is prescribed: a force on it "
+                                    "would only change the driving force; apply it to a free coordinate")
                 data["coordinate"] = f.coordinate
                 if f.type == "torsional_spring":
                     data["k"] = doc.parse(f.stiffness, fp + ("stiffness",), "kinematic")
@@ -465,13 +475,13 @@ class Builder:
             self.kin.loads.append(Load(f.type, data))
 
 
-def _complement(d: sp.Matrix) -> list[sp.Matrix]:
-    """Two unit vectors orthogonal to unit vector ``d``."""
+def _complement(d: sp.Matrix, values: dict) -> list[sp.Matrix]:
+    """Two unit vectors orthogonal to unit vector ``d`` (which may depend on parameters with ``values``)."""
     key = tuple(abs(e) if e.is_number else None for e in d)
     if key in ((1, 0, 0), (0, 1, 0), (0, 0, 1)):
         k = key.index(1)
         return [sp.Matrix(AXES["xyz"[(k + 1) % 3]]), sp.Matrix(AXES["xyz"[(k + 2) % 3]])]
-    helper = sp.Matrix([1, 0, 0]) if abs(float(d[0])) < 0.9 else sp.Matrix([0, 1, 0])
+    helper = sp.Matrix([1, 0, 0]) if abs(float(d[0].subs(values))) < 0.9 else sp.Matrix([0, 1, 0])
     n1 = unit(d.cross(helper))
     return [n1, d.cross(n1)]
 

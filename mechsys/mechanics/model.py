@@ -65,6 +65,11 @@ class MechanicalModel:
         return list(self.doc.parameters.values())
 
     @property
+    def angles(self) -> dict[str, bool]:
+        """Whether each free coordinate is an angle (wraps modulo 2 pi): 'angle:' in the file, else the joint."""
+        return {n: bool(self.kin.angles.get(n, False)) for n in self.coordinates}
+
+    @property
     def prescribed(self) -> dict[str, sp.Expr]:
         return dict(self.doc.prescribed)
 

@@ -44,9 +44,12 @@ class Document:
     prescribed: dict[str, sp.Expr] = field(default_factory=dict)  # name -> expression of t
     initial: dict[str, float] = field(default_factory=dict)
     initial_rate: dict[str, float] = field(default_factory=dict)
+    overridden: dict[tuple, str] = field(default_factory=dict)  # key path -> the --set text that replaced it
 
     # ------------------------------------------------------------------------------------- errors
     def error(self, path: Path, message: str, key: bool = False) -> InputError:
+        if tuple(path) in self.overridden:
+            return InputError(f"--set {self.overridden[tuple(path)]}: {message}")
         line, col = self.positions.lookup(path, key=key)
         return InputError(message, self.file, line, col, dotted(path))
 
@@ -67,6 +70,8 @@ class Document:
         try:
             return parse_expression(value, symbols, rates)
         except ExpressionError as exc:
+            if path in self.overridden:
+                raise InputError(f"--set {self.overridden[path]}: {exc.message}") from None
             line, col = self.positions.lookup(path)
             if isinstance(value, str):
                 col += _offset_in_scalar(self.raw_text_line(line), value, exc.column)
@@ -281,17 +286,15 @@ def parse_assignments(items: list[str] | None) -> dict[str, str]:
     return out
 
 
-def _apply_overrides(data: dict, overrides: Mapping[str, Any]) -> None:
-    params = data.setdefault("parameters", {}) if isinstance(data, dict) else {}
-    coords = data.get("coordinates", {}) if isinstance(data, dict) else {}
+def _apply_overrides(data: dict, overrides: Mapping[str, Any]) -> dict[tuple, str]:
+    """Write --set values into the raw data; return the key paths they replaced (for error messages).
+    Text values stay text, so the expression parser reads decimals exactly."""
+    params = data.setdefault("parameters", {})
+    coords = data.get("coordinates", {})
     if not isinstance(params, dict) or not isinstance(coords, dict):
-        return
+        return {}
+    replaced: dict[tuple, str] = {}
     for key, value in overrides.items():
-        if isinstance(value, str):
-            try:
-                value = float(value) if re.fullmatch(r"[-+]?[\d.]+([eE][-+]?\d+)?", value) else value
-            except ValueError:
-                pass
         m = _SET.match(key)
         if not m:
             raise InputError(f"--set {key!r}: expected NAME or der(NAME)")
@@ -299,18 +302,22 @@ def _apply_overrides(data: dict, overrides: Mapping[str, Any]) -> None:
             name = m.group("rate")
             if name not in coords:
                 raise InputError(f"--set der({name}): unknown coordinate{_hint(name, list(coords))}")
-            entry = coords[name] if isinstance(coords[name], dict) else {}
-            entry["rate"] = value
-            coords[name] = entry
+            path: tuple = ("coordinates", name, "rate")
         elif m.group("name") in params:
-            params[m.group("name")] = value
+            path = ("parameters", m.group("name"))
         elif m.group("name") in coords:
-            entry = coords[m.group("name")] if isinstance(coords[m.group("name")], dict) else {}
-            entry["initial"] = value
-            coords[m.group("name")] = entry
+            path = ("coordinates", m.group("name"), "initial")
         else:
             name = m.group("name")
             raise InputError(f"--set {name}: unknown parameter or coordinate{_hint(name, list(params) + list(coords))}")
+        if len(path) == 3:
+            entry = coords[path[1]] if isinstance(coords[path[1]], dict) else {}
+            entry[path[2]] = value
+            coords[path[1]] = entry
+        else:
+            params[path[1]] = value
+        replaced[path] = f"{key}={value}"
+    return replaced
 
 
 def _hint(name: str, options: list[str]) -> str:
@@ -336,13 +343,12 @@ def read_document(path: str | os.PathLike, overrides: Mapping[str, Any] | None =
     data, pos = load_yaml(text, file)
     if not isinstance(data, dict):
         raise InputError("a model file must be a mapping with keys such as 'name' and 'links'", file, 1, 1)
-    if overrides:
-        _apply_overrides(data, overrides)
+    replaced = _apply_overrides(data, overrides) if overrides else {}
     try:
         spec = System.model_validate(data)
     except pydantic.ValidationError as exc:
         raise _pydantic_to_input_error(exc, data, pos, file) from None
-    doc = Document(file=file, spec=spec, raw=data, positions=pos)
+    doc = Document(file=file, spec=spec, raw=data, positions=pos, overridden=replaced)
     doc._text = text
     _resolve_symbols(doc)
     return doc
@@ -362,6 +368,11 @@ def _resolve_symbols(doc: Document) -> None:
     _resolve_parameters(doc)
     for name, c in spec.coordinates.items():
         if c.prescribed is not None:
+            for key in ("initial", "rate"):
+                if key in c.model_fields_set:
+                    raise doc.error(("coordinates", name, key),
+                                    f"a prescribed coordinate has no free {key}: its motion is given by 'prescribed'",
+                                    key=True)
             doc.prescribed[name] = doc.parse(c.prescribed, ("coordinates", name, "prescribed"), "prescribed")
         else:
             doc.coords[name] = sp.Symbol(name, real=True)
