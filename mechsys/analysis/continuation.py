@@ -1,0 +1,521 @@
+"""Pseudo-arclength continuation of equilibrium branches F(x, p) = 0 with fold, branch-point and Hopf detection."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable, Sequence
+
+import numpy as np
+from scipy.optimize import brentq
+
+ArrayFn = Callable[[np.ndarray, float], np.ndarray]
+
+_MAX_CORRECTOR_ITER = 10     # Newton iterations per corrector before the step is halved
+_MAX_START_ITER = 50         # Newton iterations for the start point at fixed p
+_EASY_ITER = 3               # corrector iterations that count as "easy": grow the step
+_GROW = 1.3
+_COS_MAX_TURN = np.cos(np.radians(30.0))  # consecutive tangents turning more than this: halve the step
+_LOCATE_XTOL = 1e-13         # arclength tolerance when locating events (gives p to ~1e-9 relative and better)
+_DP_ZERO = 1e-10             # |tangent_p| below this counts as "no p-direction" (start at a fold)
+
+
+@dataclass
+class BranchPoint:
+    p: float
+    x: np.ndarray            # the unknowns
+    eigenvalues: np.ndarray  # complex, from the caller's eig callback (stability of this point)
+    stable: bool             # all Re(eigenvalues) < -tol_re
+
+
+@dataclass
+class Bifurcation:
+    kind: str      # "fold", "branch_point" or "hopf"
+    p: float
+    x: np.ndarray
+    index: int     # index in the branch's point list just before the event
+
+
+@dataclass
+class Branch:
+    points: list[BranchPoint] = field(default_factory=list)
+    bifurcations: list[Bifurcation] = field(default_factory=list)
+
+
+class _Fail(Exception):
+    """A re-corrected point inside a step could not be computed."""
+
+
+def _solve(J: np.ndarray, r: np.ndarray) -> np.ndarray:
+    try:
+        out = np.linalg.solve(J, r)
+        if np.all(np.isfinite(out)):
+            return out
+    except np.linalg.LinAlgError:
+        pass
+    return np.linalg.lstsq(J, r, rcond=None)[0]
+
+
+def _sign_changed(a: float, b: float) -> bool:
+    """True when a is nonzero and b is zero or of the opposite sign (an exact zero is reported once)."""
+    return (a > 0.0 and b <= 0.0) or (a < 0.0 and b >= 0.0)
+
+
+def _is_real(ev: np.ndarray) -> np.ndarray:
+    return np.abs(ev.imag) <= 1e-7 * (1.0 + np.abs(ev))
+
+
+class _Tracer:
+    """The scaled problem: z = (x / x_scale, p); the arclength and all tangents live in z."""
+
+    def __init__(self, F: ArrayFn, Fx: ArrayFn, Fp: ArrayFn, eig: ArrayFn, n: int, x_scale, tol: float,
+                 tol_re: float) -> None:
+        self.F, self.Fx, self.Fp, self.eig = F, Fx, Fp, eig
+        self.n = n
+        if x_scale is None:
+            self.s = np.ones(n)
+        else:
+            self.s = np.broadcast_to(np.asarray(x_scale, dtype=float), (n,)).copy()
+            if not np.all(np.isfinite(self.s)) or np.any(self.s <= 0.0):
+                raise ValueError("x_scale must be positive and finite")
+        self.tol, self.tol_re = tol, tol_re
+
+    # -- conversions and evaluations --------------------------------------------------------------
+    def z_of(self, x: np.ndarray, p: float) -> np.ndarray:
+        return np.concatenate([np.asarray(x, dtype=float).reshape(self.n) / self.s, [float(p)]])
+
+    def xp(self, z: np.ndarray) -> tuple[np.ndarray, float]:
+        return z[:self.n] * self.s, float(z[self.n])
+
+    def residual(self, z: np.ndarray) -> np.ndarray:
+        x, p = self.xp(z)
+        return np.asarray(self.F(x, p), dtype=float).reshape(self.n)
+
+    def jac(self, z: np.ndarray) -> np.ndarray:
+        """[Fx * x_scale | Fp], n x (n+1)."""
+        x, p = self.xp(z)
+        A = np.asarray(self.Fx(x, p), dtype=float).reshape(self.n, self.n) * self.s[None, :]
+        b = np.asarray(self.Fp(x, p), dtype=float).reshape(self.n)
+        return np.column_stack([A, b])
+
+    def det(self, z: np.ndarray) -> float:
+        return float(np.linalg.det(self.jac(z)[:, :self.n]))
+
+    def eigenvalues(self, z: np.ndarray) -> np.ndarray:
+        x, p = self.xp(z)
+        return np.atleast_1d(np.asarray(self.eig(x, p), dtype=complex)).ravel()
+
+    # -- Newton on the bordered system -------------------------------------------------------------
+    def newton(self, z_guess: np.ndarray, border: np.ndarray, max_iter: int = _MAX_CORRECTOR_ITER,
+               monotone: bool = True) -> tuple[np.ndarray, int] | None:
+        """Solve [F(z); border.(z - z_guess)] = 0 from z_guess; (z, iterations) or None."""
+        z = z_guess.copy()
+        prev = np.inf
+        for k in range(1, max_iter + 1):
+            try:
+                Fv = self.residual(z)
+                A = self.jac(z)
+            except (ArithmeticError, ValueError):
+                return None
+            if not (np.all(np.isfinite(Fv)) and np.all(np.isfinite(A))):
+                return None
+            r = np.concatenate([Fv, [border @ (z - z_guess)]])
+            dz = _solve(np.vstack([A, border]), -r)
+            if not np.all(np.isfinite(dz)):
+                return None
+            z = z + dz
+            step = float(np.max(np.abs(dz)))
+            zmax = 1.0 + float(np.max(np.abs(z)))
+            if step <= self.tol * zmax:
+                # a least-squares step on a singular Jacobian can be tiny without solving F = 0: check F
+                try:
+                    res = float(np.max(np.abs(self.residual(z)), initial=0.0))
+                except (ArithmeticError, ValueError):
+                    return None
+                if res <= 1e3 * self.tol * (1.0 + float(np.max(np.abs(A))) * zmax):
+                    return z, k
+                return None
+            if monotone and k >= 2 and step > 2.0 * prev:
+                return None
+            prev = step
+        return None
+
+    def correct_fixed_p(self, z_guess: np.ndarray, max_iter: int = _MAX_CORRECTOR_ITER,
+                        monotone: bool = True) -> np.ndarray | None:
+        e = np.zeros(self.n + 1)
+        e[self.n] = 1.0
+        res = self.newton(z_guess, e, max_iter, monotone)
+        if res is None:
+            return None
+        z = res[0]
+        z[self.n] = z_guess[self.n]
+        return z
+
+    # -- tangents ----------------------------------------------------------------------------------
+    def tangent(self, z: np.ndarray, t_ref: np.ndarray | None) -> np.ndarray:
+        """Unit null vector of [Fx | Fp] at z; oriented by t_ref (positive dot product) when given."""
+        A = self.jac(z)
+        v = None
+        if t_ref is not None:
+            rhs = np.zeros(self.n + 1)
+            rhs[-1] = 1.0
+            try:
+                v = np.linalg.solve(np.vstack([A, t_ref]), rhs)
+                if not np.all(np.isfinite(v)) or np.linalg.norm(v) == 0.0:
+                    v = None
+            except np.linalg.LinAlgError:
+                v = None
+        if v is None:
+            _, _, Vt = np.linalg.svd(A)
+            v = Vt[-1].copy()
+        v /= np.linalg.norm(v)
+        if t_ref is not None and v @ t_ref < 0.0:
+            v = -v
+        return v
+
+
+@dataclass
+class _Node:
+    z: np.ndarray
+    t: np.ndarray
+    det: float
+    ev: np.ndarray
+
+
+def _pos_counts(ev: np.ndarray, tol_re: float) -> tuple[int, int]:
+    real = _is_real(ev)
+    pos = ev.real > tol_re
+    return int(np.sum(pos & real)), int(np.sum(pos & ~real))
+
+
+def _pair_crossing(ev0: np.ndarray, ev1: np.ndarray, real: bool, tol_re: float):
+    """Pair (by sorting) the eigenvalues of one kind at both ends and return the pair whose Re crosses 0."""
+    if real:
+        a = np.sort(ev0[_is_real(ev0)].real).astype(complex)
+        b = np.sort(ev1[_is_real(ev1)].real).astype(complex)
+    else:
+        a = ev0[~_is_real(ev0) & (ev0.imag > 0)]
+        b = ev1[~_is_real(ev1) & (ev1.imag > 0)]
+        a, b = a[np.argsort(a.imag)], b[np.argsort(b.imag)]
+    if len(a) != len(b) or len(a) == 0:
+        return None
+    crossing = [k for k in range(len(a)) if (a[k].real > tol_re) != (b[k].real > tol_re)]
+    if not crossing:
+        return None
+    k = min(crossing, key=lambda j: abs(a[j].real) + abs(b[j].real))
+    return a[k], b[k]
+
+
+class _Continuation:
+    def __init__(self, tr: _Tracer, p_min: float, p_max: float, ds: float, ds_min: float, ds_max: float,
+                 max_steps: int) -> None:
+        self.tr = tr
+        self.p_min, self.p_max = float(p_min), float(p_max)
+        self.ds, self.ds_min, self.ds_max = float(ds), float(ds_min), float(ds_max)
+        self.max_steps = int(max_steps)
+
+    def node(self, z: np.ndarray, t: np.ndarray) -> _Node:
+        return _Node(z, t, self.tr.det(z), self.tr.eigenvalues(z))
+
+    def point(self, nd: _Node) -> BranchPoint:
+        x, p = self.tr.xp(nd.z)
+        ev = nd.ev
+        stable = bool(np.all(ev.real < -self.tr.tol_re))
+        return BranchPoint(p=p, x=x, eigenvalues=ev.copy(), stable=stable)
+
+    # -- points inside a step, parameterized by the projection s on the previous tangent -------------
+    def at(self, a: _Node, b: _Node, s: float) -> np.ndarray:
+        s1 = float(a.t @ (b.z - a.z))
+        if s <= 0.0:
+            return a.z
+        if s >= s1:
+            return b.z
+        zp = a.z + (s / s1) * (b.z - a.z)
+        res = self.tr.newton(zp, a.t, max_iter=4 * _MAX_CORRECTOR_ITER)
+        if res is None:
+            raise _Fail
+        return res[0]
+
+    def locate(self, a: _Node, b: _Node, g: Callable[[float], float], g0: float, g1: float,
+               pred: Callable[[float], bool] | None = None) -> float:
+        """Arclength s in [0, s1] where g changes sign (Brent), else bisection on pred (event happened by s)."""
+        s1 = float(a.t @ (b.z - a.z))
+        try:
+            if g1 == 0.0:
+                return s1
+            if g0 * g1 < 0.0:
+                return float(brentq(g, 0.0, s1, xtol=_LOCATE_XTOL, maxiter=200))
+            if pred is not None:
+                lo, hi = 0.0, s1
+                while hi - lo > _LOCATE_XTOL * (1.0 + s1):
+                    mid = 0.5 * (lo + hi)
+                    if pred(mid):
+                        hi = mid
+                    else:
+                        lo = mid
+                return hi
+        except (_Fail, ValueError, RuntimeError):
+            pass
+        if g0 != g1 and np.isfinite(g0) and np.isfinite(g1):
+            return float(np.clip(s1 * g0 / (g0 - g1), 0.0, s1))
+        return 0.5 * s1
+
+    def detect(self, a: _Node, b: _Node, index: int) -> list[tuple[float, Bifurcation]]:
+        tr = self.tr
+        n = tr.n
+        tol_re = tr.tol_re
+        events: list[tuple[str, float]] = []
+        ta, tb = a.t[n], b.t[n]
+        ta = 0.0 if abs(ta) < _DP_ZERO else ta
+        fold = _sign_changed(ta, tb)
+        if fold:
+            def g_fold(s: float) -> float:
+                return float(tr.tangent(self.at(a, b, s), a.t)[n])
+            events.append(("fold", self.locate(a, b, g_fold, ta, tb)))
+
+        ra, ca = _pos_counts(a.ev, tol_re)
+        rb, cb = _pos_counts(b.ev, tol_re)
+        dn, dr, dc = (rb + cb) - (ra + ca), rb - ra, cb - ca
+        real_cross = dn != 0 and dr != 0 and not (dc != 0 and dn % 2 == 0 and abs(dn) >= 2)
+        hopf = dn != 0 and dc != 0 and not real_cross
+
+        if not fold and ta != 0.0:  # ta == 0: the step starts at a fold (only possible at the start point)
+            if _sign_changed(a.det, b.det):
+                def g_det(s: float) -> float:
+                    return tr.det(self.at(a, b, s))
+                events.append(("branch_point", self.locate(a, b, g_det, a.det, b.det)))
+            elif real_cross:
+                events.append(("branch_point", self._locate_eig(a, b, True)))
+        if hopf:
+            events.append(("hopf", self._locate_eig(a, b, False)))
+
+        out = []
+        for kind, s in events:
+            try:
+                z = self.at(a, b, s)
+            except _Fail:
+                s1 = float(a.t @ (b.z - a.z))
+                z = a.z + (s / s1) * (b.z - a.z) if s1 > 0 else a.z
+            x, p = tr.xp(z)
+            out.append((s, Bifurcation(kind=kind, p=p, x=x, index=index)))
+        out.sort(key=lambda e: e[0])
+        return out
+
+    def _locate_eig(self, a: _Node, b: _Node, real: bool) -> float:
+        tr = self.tr
+        tol_re = tr.tol_re
+        s1 = float(a.t @ (b.z - a.z))
+        n0 = sum(_pos_counts(a.ev, tol_re))
+
+        def pred(s: float) -> bool:
+            return sum(_pos_counts(tr.eigenvalues(self.at(a, b, s)), tol_re)) != n0
+
+        pair = _pair_crossing(a.ev, b.ev, real, tol_re)
+        if pair is None:
+            return self.locate(a, b, lambda s: 0.0, 1.0, 1.0, pred)
+        l0, l1 = pair
+
+        def g(s: float) -> float:
+            ev = tr.eigenvalues(self.at(a, b, s))
+            ev = ev[_is_real(ev)] if real else ev[~_is_real(ev) & (ev.imag > 0)]
+            if len(ev) == 0:
+                raise _Fail
+            ref = l0 + (s / s1) * (l1 - l0) if s1 > 0 else l0
+            return float(ev[np.argmin(np.abs(ev - ref))].real)
+
+        return self.locate(a, b, g, float(l0.real), float(l1.real), pred)
+
+    # -- the predictor-corrector loop ----------------------------------------------------------------
+    def run(self, z0: np.ndarray, direction: float) -> tuple[Branch, bool]:
+        tr = self.tr
+        n = tr.n
+        t0 = tr.tangent(z0, None)
+        if abs(t0[n]) > _DP_ZERO:
+            t0 = t0 * np.sign(t0[n]) * np.sign(direction)
+        else:
+            k = int(np.argmax(np.abs(t0) > _DP_ZERO))
+            t0 = t0 * np.sign(t0[k]) * np.sign(direction)
+        start = self.node(z0, t0)
+        cur = start
+        branch = Branch(points=[self.point(start)], bifurcations=[])
+        closed = False
+        ds = min(max(self.ds, self.ds_min), self.ds_max)
+        arc = 0.0
+        accepted = attempts = 0
+        while accepted < self.max_steps and attempts < 20 * self.max_steps:
+            attempts += 1
+            final = False
+            res = tr.newton(cur.z + ds * cur.t, cur.t)
+            z1 = t1 = None
+            iters = _MAX_CORRECTOR_ITER
+            if res is not None:
+                z1, iters = res
+                if np.linalg.norm(z1 - (cur.z + ds * cur.t)) > ds:
+                    z1 = None
+            if z1 is not None:
+                try:
+                    t1 = tr.tangent(z1, cur.t)
+                except (np.linalg.LinAlgError, ValueError):
+                    t1 = None
+                if t1 is None or (t1 @ cur.t < _COS_MAX_TURN and ds > 2.0 * self.ds_min):
+                    z1 = None
+            if z1 is not None and not (self.p_min <= z1[n] <= self.p_max):
+                bound = self.p_max if z1[n] > self.p_max else self.p_min
+                if cur.z[n] == bound:
+                    break  # already on the boundary, stepping out of the range
+                theta = (bound - cur.z[n]) / (z1[n] - cur.z[n])
+                guess = cur.z + theta * (z1 - cur.z)
+                guess[n] = bound
+                zc = tr.correct_fixed_p(guess)
+                if zc is None or float(cur.t @ (zc - cur.z)) <= 0.0:
+                    z1 = None
+                else:
+                    z1, t1, final = zc, tr.tangent(zc, cur.t), True
+            if z1 is None:
+                ds *= 0.5
+                if ds < self.ds_min:
+                    break
+                continue
+            seg = float(cur.t @ (z1 - cur.z))
+            if accepted >= 2 and arc > 2.0 * seg and start.t @ cur.t > 0.0:
+                s_st = float(cur.t @ (start.z - cur.z))
+                if 0.0 < s_st <= seg * (1.0 + 1e-12):
+                    chord = cur.z + (s_st / seg) * (z1 - cur.z)
+                    if np.linalg.norm(start.z - chord) <= 0.25 * np.linalg.norm(z1 - cur.z):
+                        z1, t1, final, closed = start.z, start.t, True, True
+            nxt = self.node(z1, t1) if not closed else start
+            for _, bif in self.detect(cur, nxt, len(branch.points) - 1):
+                branch.bifurcations.append(bif)
+            branch.points.append(self.point(nxt) if not closed else branch.points[0])
+            accepted += 1
+            arc += float(np.linalg.norm(z1 - cur.z))
+            cur = nxt
+            if final:
+                break
+            if iters <= _EASY_ITER:
+                ds = min(ds * _GROW, self.ds_max)
+        if closed:
+            first = branch.points[0]
+            branch.points[-1] = BranchPoint(p=first.p, x=first.x.copy(), eigenvalues=first.eigenvalues.copy(),
+                                            stable=first.stable)
+        return branch, closed
+
+
+def _setup(F: ArrayFn, Fx: ArrayFn, Fp: ArrayFn, x0, p0: float, p_min: float, p_max: float, eig: ArrayFn,
+           ds: float, ds_min: float, ds_max: float, max_steps: int, tol: float, tol_re: float,
+           x_scale) -> tuple[_Continuation, np.ndarray]:
+    if not p_min < p_max:
+        raise ValueError(f"continuation: need p_min < p_max, got [{p_min}, {p_max}]")
+    if not (0.0 < ds_min <= ds_max and ds > 0.0):
+        raise ValueError("continuation: need 0 < ds_min <= ds_max and ds > 0")
+    if not p_min <= p0 <= p_max:
+        raise ValueError(f"continuation: start parameter p0={p0} is outside [{p_min}, {p_max}]")
+    x0 = np.atleast_1d(np.asarray(x0, dtype=float)).ravel()
+    tr = _Tracer(F, Fx, Fp, eig, len(x0), x_scale, tol, tol_re)
+    z = tr.correct_fixed_p(tr.z_of(x0, p0), max_iter=_MAX_START_ITER, monotone=False)
+    if z is None:
+        try:
+            r = float(np.max(np.abs(tr.residual(tr.z_of(x0, p0)))))
+        except Exception:  # noqa: BLE001 - only for the message
+            r = float("nan")
+        raise ValueError(f"continuation: Newton correction of the start point at fixed p={p0} did not converge "
+                         f"in {_MAX_START_ITER} iterations (|F(x0, p0)| = {r:.3g}); x0 is not near an "
+                         f"equilibrium at p0, or the Jacobian Fx is wrong")
+    return _Continuation(tr, p_min, p_max, ds, ds_min, ds_max, max_steps), z
+
+
+def continue_branch(F: ArrayFn, Fx: ArrayFn, Fp: ArrayFn, x0: np.ndarray | Sequence[float], p0: float,
+                    p_min: float, p_max: float, eig: ArrayFn, *, ds: float = 0.05, ds_min: float = 1e-6,
+                    ds_max: float = 0.5, max_steps: int = 2000, tol: float = 1e-10, tol_re: float = 1e-9,
+                    direction: float = +1.0, x_scale: float | np.ndarray | None = None) -> Branch:
+    """Follow the branch F(x, p) = 0 through (x0, p0) by pseudo-arclength continuation, in one direction.
+
+    The start is corrected by Newton at fixed p0 (``ValueError`` if that fails). The first tangent is the null
+    vector of [Fx | Fp], oriented so that dp has the sign of ``direction``; if dp ~ 0 at the start (a start at a
+    fold) it is oriented so that its first nonzero component has the sign of ``direction`` (positive for +1), and
+    a fold exactly at the start is not reported (``sweep_parameter`` reports it). Arclength is measured in
+    (x / x_scale, p). The branch ends when p leaves [p_min, p_max] (the last point is placed exactly on the
+    bound), after ``max_steps`` steps, when the step would drop below ``ds_min``, or when it closes on its start
+    (the last point then repeats the first). Events are located between consecutive points: "fold" (tangent dp
+    changes sign), "branch_point" (det Fx, or a real eigenvalue of ``eig``, changes sign without a fold) and
+    "hopf" (a complex pair of ``eig`` crosses the imaginary axis); eigenvalues with |Re| <= tol_re count as 0.
+    """
+    if not direction:
+        raise ValueError("continue_branch: direction must be nonzero")
+    cont, z0 = _setup(F, Fx, Fp, x0, p0, p_min, p_max, eig, ds, ds_min, ds_max, max_steps, tol, tol_re, x_scale)
+    return cont.run(z0, direction)[0]
+
+
+def _on_branch(cont: _Continuation, branch: Branch, z: np.ndarray) -> bool:
+    """Whether the corrected point z lies on the traced branch (re-corrected onto it, not just near a chord)."""
+    tr = cont.tr
+    zs = [tr.z_of(pt.x, pt.p) for pt in branch.points]
+    scale = 1.0 + float(np.max(np.abs(z)))
+    for a, b in zip(zs[:-1], zs[1:]):
+        d = b - a
+        L = float(np.linalg.norm(d))
+        if L == 0.0:
+            if np.linalg.norm(z - a) <= 1e-7 * scale:
+                return True
+            continue
+        t = d / L
+        s = float(t @ (z - a))
+        if s < -1e-9 * scale or s > L * (1 + 1e-9):
+            continue
+        if np.linalg.norm(z - (a + s * t)) > L:
+            continue
+        res = tr.newton(a + s * t, t)
+        if res is not None and np.linalg.norm(res[0] - z) <= 1e-6 * scale:
+            return True
+    return len(zs) == 1 and np.linalg.norm(zs[0] - z) <= 1e-7 * scale
+
+
+def sweep_parameter(F: ArrayFn, Fx: ArrayFn, Fp: ArrayFn, starts: list[tuple[np.ndarray, float]], p_min: float,
+                    p_max: float, eig: ArrayFn, **kw) -> list[Branch]:
+    """Trace each start both ways (direction -1 and +1) and merge the two halves into one branch along the arc.
+
+    The merged points run from the end of the direction -1 half, through the start, to the end of the +1 half;
+    bifurcation indices refer to the merged list. A start that lies on an already-traced branch is skipped; a
+    closed branch is traced once. ``kw`` are the keyword options of ``continue_branch`` (``direction`` ignored).
+    """
+    kw = dict(kw)
+    kw.pop("direction", None)
+    opts = {k: kw[k] for k in ("ds", "ds_min", "ds_max", "max_steps", "tol", "tol_re", "x_scale") if k in kw}
+    unknown = set(kw) - set(opts)
+    if unknown:
+        raise TypeError(f"sweep_parameter: unknown options {sorted(unknown)}")
+    defaults = dict(ds=0.05, ds_min=1e-6, ds_max=0.5, max_steps=2000, tol=1e-10, tol_re=1e-9, x_scale=None)
+    defaults.update(opts)
+    out: list[tuple[_Continuation, Branch]] = []
+    for x0, p0 in starts:
+        cont, z0 = _setup(F, Fx, Fp, x0, p0, p_min, p_max, eig, defaults["ds"], defaults["ds_min"],
+                          defaults["ds_max"], defaults["max_steps"], defaults["tol"], defaults["tol_re"],
+                          defaults["x_scale"])
+        if any(_on_branch(cont, br, z0) for _, br in out):
+            continue
+        fwd, closed = cont.run(z0, +1.0)
+        if closed:
+            out.append((cont, fwd))
+            continue
+        bwd, _ = cont.run(z0, -1.0)
+        out.append((cont, _merge(bwd, fwd)))
+    return [br for _, br in out]
+
+
+def _merge(bwd: Branch, fwd: Branch) -> Branch:
+    m = len(bwd.points)
+    points = list(reversed(bwd.points)) + fwd.points[1:]
+    bifs = [Bifurcation(b.kind, b.p, b.x, m - 2 - b.index) for b in reversed(bwd.bifurcations)]
+    start = fwd.points[0]
+    # a fold exactly at the start (not reported by either half): both halves leave it towards the same side in p
+    if len(bwd.points) > 1 and len(fwd.points) > 1:
+        dpb, dpf = bwd.points[1].p - start.p, fwd.points[1].p - start.p
+        first_fold = any(b.kind == "fold" and b.index == 0 for b in bwd.bifurcations + fwd.bifurcations)
+        if dpb * dpf > 0.0 and not first_fold:
+            bifs.append(Bifurcation("fold", start.p, start.x.copy(), m - 1))
+    x_tol = 1e-7 * (1.0 + float(np.max(np.abs(start.x), initial=0.0)))
+    for b in fwd.bifurcations:
+        dup = any(c.kind == b.kind and abs(c.p - b.p) <= 1e-9 * (1 + abs(b.p)) and
+                  float(np.max(np.abs(c.x - b.x), initial=0.0)) <= x_tol for c in bifs)
+        if not dup:
+            bifs.append(Bifurcation(b.kind, b.p, b.x, b.index + m - 1))
+    bifs.sort(key=lambda b: b.index)
+    return Branch(points=points, bifurcations=bifs)

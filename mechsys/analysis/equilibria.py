@@ -1,0 +1,347 @@
+"""Equilibria and steady motions: deflated multistart Newton with exact Jacobians, angles on the circle."""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from functools import cached_property
+
+import numpy as np
+import sympy as sp
+
+from mechsys.errors import AnalysisError
+from mechsys.mechanics.model import MechanicalModel
+from mechsys.numeric.lambdify import compile_exprs
+
+
+def wrap(angle: float) -> float:
+    """An angle in (-pi, pi]."""
+    a = math.remainder(angle, 2 * math.pi)
+    return math.pi if a == -math.pi else a + 0.0  # no negative zero
+
+
+def parameter_values(model: MechanicalModel, changes: dict[str, float] | None = None) -> np.ndarray:
+    """Numeric parameter vector (model.parameter_symbols order) with some parameters set to new values; the
+    parameters defined from them follow (dM = Mo/7 moves with Mo)."""
+    changes = changes or {}
+    values: dict[sp.Symbol, float] = {}
+    for name, expr in model.doc.parameter_exprs.items():
+        sym = model.doc.parameters[name]
+        values[sym] = float(changes[name]) if name in changes else float(expr.xreplace(values).evalf())
+    return np.array([values[s] for s in model.parameter_symbols], dtype=float)
+
+
+@dataclass
+class Equilibrium:
+    """One equilibrium (or steady motion) with its linear stability."""
+
+    coordinates: dict[str, float]
+    rates: dict[str, float]
+    multipliers: list[float]
+    eigenvalues: np.ndarray = field(default_factory=lambda: np.zeros(0, complex))
+    jacobian: np.ndarray | None = None
+    stability: str = "undecided"
+    critical: bool = False
+    reason: str = ""
+
+    def to_dict(self) -> dict:
+        return {
+            "coordinates": dict(self.coordinates),
+            "rates": dict(self.rates),
+            "eigenvalues": [[float(e.real), float(e.imag)] for e in self.eigenvalues],
+            "stability": self.stability,
+            "critical": self.critical,
+            "reason": self.reason,
+        }
+
+
+@dataclass
+class EquilibriaResult:
+    equilibria: list[Equilibrium]
+    message: str = ""
+    cyclic: list[str] = field(default_factory=list)
+    fixed_rates: dict[str, float] = field(default_factory=dict)
+
+
+class EquilibriumProblem:
+    """The algebraic equations of rest: f(q, u) + A^T lambda = 0 and Phi(q) = 0, with u = 0 except the steady
+    rates of cyclic coordinates, which are unknowns (or fixed at their initial rate when the system leaves
+    them free: a family of steady motions)."""
+
+    def __init__(self, model: MechanicalModel) -> None:
+        self.model = model
+        if not model.is_holonomic:
+            raise AnalysisError("equilibria of nonholonomic systems are not supported")
+        if not model.is_autonomous():
+            raise AnalysisError("the equations depend explicitly on time (non-autonomous): there are no "
+                                "equilibria in the ordinary sense")
+        self.eq = model.equations("lagrange")
+        self.cyclic = [c for c in model.cyclic_coordinates() if not model.kin.constraints]
+        self.free = [c for c in model.coordinates if c not in self.cyclic]
+        self.nq = len(self.free)
+        self.m = len(model.kin.constraints)
+        self.lam = sp.symbols(f"lambda1:{self.m + 1}", real=True) if self.m else ()
+        self.angles = model.angles
+        self.fixed_rates = self._family_rates()
+        self.rate_unknowns = [c for c in self.cyclic if c not in self.fixed_rates]
+
+    # ------------------------------------------------------------------------------------- symbols
+    def _q(self, name: str) -> sp.Symbol:
+        return self.model.doc.coords[name]
+
+    def _u(self, name: str) -> sp.Symbol:
+        return self.model.doc.rates[name]
+
+    @cached_property
+    def rest_substitution(self) -> dict:
+        """u = 0 for non-cyclic coordinates, t = 0 (autonomous), cyclic angles at 0 (they do not appear)."""
+        subs = {self._u(c): 0 for c in self.free}
+        subs.update({self._q(c): 0 for c in self.cyclic})
+        subs[self.model.t] = 0
+        return subs
+
+    @cached_property
+    def residual_exprs(self) -> sp.Matrix:
+        eq = self.eq
+        F = eq.f
+        if self.m:
+            F = F + eq.A.T * sp.Matrix(self.lam)
+        rows = list(F.xreplace(self.rest_substitution))
+        rows += list(self.model.holonomic_constraints.xreplace({self.model.t: 0}))
+        return sp.Matrix(rows)
+
+    def _family_rates(self) -> dict[str, float]:
+        """Cyclic rates whose equation vanishes identically at rest (e.g. a free rotor): fixed at the initial rate."""
+        fixed = {}
+        F = self.eq.f.xreplace(self.rest_substitution)
+        rng = np.random.default_rng(2)
+        syms = sorted(F.free_symbols - set(self.model.parameter_symbols), key=str)
+        fn = compile_exprs(list(F), syms + self.model.parameter_symbols) if syms else None
+        p = list(parameter_values(self.model))
+        for c in self.cyclic:
+            i = self.model.coordinates.index(c)
+            if F[i] == 0 or (fn is not None and all(
+                    abs(fn(*rng.uniform(-2, 2, len(syms)), *p)[i]) < 1e-12 for _ in range(4))):
+                fixed[c] = self.model.doc.initial_rate[c]
+        return fixed
+
+    @cached_property
+    def unknowns(self) -> list[sp.Symbol]:
+        return [self._q(c) for c in self.free] + [self._u(c) for c in self.rate_unknowns] + list(self.lam)
+
+    @cached_property
+    def unknown_names(self) -> list[str]:
+        return list(self.free) + [f"der({c})" for c in self.rate_unknowns] + [str(s) for s in self.lam]
+
+    @cached_property
+    def _args(self) -> list[sp.Symbol]:
+        return self.unknowns + [self._u(c) for c in self.fixed_rates] + list(self.model.parameter_symbols)
+
+    @cached_property
+    def _F(self):
+        return compile_exprs(list(self.residual_exprs), self._args)
+
+    @cached_property
+    def _J(self):
+        return compile_exprs(list(self.residual_exprs.jacobian(self.unknowns)), self._args)
+
+    def _dF_dp_exprs(self) -> sp.Matrix:
+        return self.residual_exprs.jacobian(self.model.parameter_symbols)
+
+    @cached_property
+    def _Fp(self):
+        return compile_exprs(list(self._dF_dp_exprs()), self._args)
+
+    # ------------------------------------------------------------------------------------- numerics
+    def extra(self) -> list[float]:
+        return [self.fixed_rates[c] for c in self.fixed_rates]
+
+    def F(self, z: np.ndarray, p: np.ndarray) -> np.ndarray:
+        return np.array(self._F(*z, *self.extra(), *p), dtype=float)
+
+    def J(self, z: np.ndarray, p: np.ndarray) -> np.ndarray:
+        n = len(self.unknowns)
+        return np.array(self._J(*z, *self.extra(), *p), dtype=float).reshape(len(self.residual_exprs), n)
+
+    def Fp(self, z: np.ndarray, p: np.ndarray) -> np.ndarray:
+        """dF/dp for every parameter (columns in model.parameter_symbols order)."""
+        return np.array(self._Fp(*z, *self.extra(), *p), dtype=float).reshape(len(self.residual_exprs), -1)
+
+    def is_angle(self) -> np.ndarray:
+        return np.array([self.angles.get(c, False) for c in self.free] + [False] * (len(self.unknowns) - self.nq))
+
+    def normalize(self, z: np.ndarray) -> np.ndarray:
+        z = z.copy()
+        for k, is_angle in enumerate(self.is_angle()):
+            if is_angle:
+                z[k] = wrap(z[k])
+        return z
+
+    def distance(self, a: np.ndarray, b: np.ndarray) -> float:
+        d = a - b
+        ang = self.is_angle()
+        d[ang] = [wrap(x) for x in d[ang]]
+        return float(np.linalg.norm(d[: self.nq + len(self.rate_unknowns)]))
+
+    def equilibrium(self, z: np.ndarray) -> Equilibrium:
+        z = self.normalize(z)
+        coords = {c: float(z[k]) for k, c in enumerate(self.free)}
+        rates = {c: float(z[self.nq + k]) for k, c in enumerate(self.rate_unknowns)}
+        rates.update(self.fixed_rates)
+        rates = {c: rates[c] for c in self.cyclic}
+        lam = [float(x) for x in z[self.nq + len(self.rate_unknowns):]]
+        return Equilibrium(coords, rates, lam)
+
+    def state(self, e: Equilibrium) -> np.ndarray:
+        return np.array([e.coordinates[c] for c in self.free] + [e.rates[c] for c in self.rate_unknowns]
+                        + list(e.multipliers), dtype=float)
+
+
+# ----------------------------------------------------------------------------------------- solving
+def _newton(problem: EquilibriumProblem, z: np.ndarray, p: np.ndarray, roots: list[np.ndarray],
+            max_iter: int = 60) -> np.ndarray | None:
+    """Deflated Newton (Farrell et al.): roots already found repel the iteration; backtracking on |G|."""
+    n = len(z)
+
+    def G_and_JG(z: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        F = problem.F(z, p)
+        J = problem.J(z, p)
+        mu, grad_log = 1.0, np.zeros(n)
+        for r in roots:
+            d = z - r
+            ang = problem.is_angle()
+            d[ang] = [wrap(x) for x in d[ang]]
+            d2 = float(d @ d)
+            if d2 < 1e-28:
+                d2 = 1e-28
+            factor = 1.0 / d2 + 1.0
+            mu *= factor
+            grad_log += (-2.0 * d / d2**2) / factor
+        G = mu * F
+        JG = mu * J + np.outer(F, mu * grad_log)
+        return F, G, JG
+
+    for _ in range(max_iter):
+        F, G, JG = G_and_JG(z)
+        if not np.all(np.isfinite(JG)):
+            return None
+        try:
+            step = np.linalg.lstsq(JG, -G, rcond=None)[0]
+        except np.linalg.LinAlgError:
+            return None
+        scale = 1.0
+        g0 = float(np.linalg.norm(G))
+        while scale > 1e-4:
+            trial = z + scale * step
+            try:
+                g1 = float(np.linalg.norm(G_and_JG(trial)[1]))
+            except (ValueError, ZeroDivisionError, OverflowError):
+                g1 = np.inf
+            if np.isfinite(g1) and g1 <= (1 - 1e-4 * scale) * g0 + 1e-300:
+                break
+            scale *= 0.5
+        z = z + scale * step
+        if np.linalg.norm(scale * step, np.inf) < 1e-12 * (1 + np.linalg.norm(z, np.inf)):
+            break
+    return _polish(problem, z, p)
+
+
+def _polish(problem: EquilibriumProblem, z: np.ndarray, p: np.ndarray) -> np.ndarray | None:
+    """Plain Newton to full accuracy, then accept only a genuine zero of F."""
+    for _ in range(8):
+        F = problem.F(z, p)
+        J = problem.J(z, p)
+        if not (np.all(np.isfinite(F)) and np.all(np.isfinite(J))):
+            return None
+        step = np.linalg.lstsq(J, -F, rcond=None)[0]
+        z = z + step
+        if np.linalg.norm(step, np.inf) < 1e-14 * (1 + np.linalg.norm(z, np.inf)):
+            break
+    F = problem.F(z, p)
+    J = problem.J(z, p)
+    scale = max(1.0, float(np.max(np.abs(J))) * max(1.0, float(np.max(np.abs(z)))))
+    if not np.all(np.isfinite(F)) or np.max(np.abs(F)) > 1e-9 * scale:
+        return None
+    return z
+
+
+def _boxes(problem: EquilibriumProblem, search: dict[str, tuple[float, float]] | None) -> list[tuple[float, float]]:
+    search = dict(search or {})
+    model = problem.model
+    known = set(problem.free) | set(problem.rate_unknowns) | {f"der({c})" for c in problem.rate_unknowns}
+    for name in search:
+        if name not in known:
+            from mechsys.errors import InputError
+
+            raise InputError(f"--search {name}: not a free non-cyclic coordinate or cyclic rate "
+                             f"(choose from {', '.join(sorted(known)) or 'none'})")
+    boxes = []
+    for c in problem.free:
+        if c in search:
+            boxes.append(search[c])
+        elif problem.angles.get(c, False):
+            boxes.append((-math.pi, math.pi))
+        else:
+            s = max(10.0, 10 * abs(model.doc.initial.get(c, 0.0)))
+            boxes.append((-s, s))
+    for c in problem.rate_unknowns:
+        box = search.get(c) or search.get(f"der({c})")
+        if box is None:
+            s = max(10.0, 3 * abs(model.doc.initial_rate.get(c, 0.0)))
+            box = (-s, s)
+        boxes.append(box)
+    return boxes
+
+
+def solve_equilibria(problem: EquilibriumProblem, p: np.ndarray, search: dict | None = None, starts: int | None = None,
+                     seed: int = 0) -> list[np.ndarray]:
+    """All roots found from multistart deflated Newton inside the search box (multipliers start from lstsq)."""
+    boxes = _boxes(problem, search)
+    nz = len(boxes)
+    rng = np.random.default_rng(seed)
+    count = starts if starts is not None else 24 + 24 * nz
+    candidates = []
+    initial = [problem.model.doc.initial.get(c, 0.0) for c in problem.free] + [
+        problem.model.doc.initial_rate.get(c, 0.0) for c in problem.rate_unknowns]
+    candidates.append(np.array(initial, dtype=float))
+    candidates.append(np.zeros(nz))
+    for _ in range(count):
+        candidates.append(np.array([rng.uniform(lo, hi) for lo, hi in boxes]))
+    roots: list[np.ndarray] = []
+    for start in candidates:
+        z0 = np.concatenate([start, _multiplier_guess(problem, start, p)])
+        z = _newton(problem, z0, p, roots)
+        if z is None:
+            continue
+        z = problem.normalize(z)
+        inside = all(lo - 1e-9 <= z[k] <= hi + 1e-9 or problem.is_angle()[k] for k, (lo, hi) in enumerate(boxes))
+        if not inside:
+            continue
+        if any(problem.distance(z, r) < 1e-7 * (1 + np.linalg.norm(z[:nz])) for r in roots):
+            continue
+        roots.append(z)
+    return roots
+
+
+def _multiplier_guess(problem: EquilibriumProblem, start: np.ndarray, p: np.ndarray) -> np.ndarray:
+    if not problem.m:
+        return np.zeros(0)
+    z = np.concatenate([start, np.zeros(problem.m)])
+    F0 = problem.F(z, p)[: len(problem.model.coordinates)]
+    J = problem.J(z, p)[: len(problem.model.coordinates), -problem.m:]
+    return np.linalg.lstsq(J, -F0, rcond=None)[0]
+
+
+def find_equilibria(model: MechanicalModel, search: dict[str, tuple[float, float]] | None = None,
+                    starts: int | None = None, seed: int = 0) -> EquilibriaResult:
+    """Equilibria (and steady motions of cyclic coordinates) with their Lyapunov stability."""
+    from mechsys.analysis.stability import assess
+
+    problem = EquilibriumProblem(model)
+    p = parameter_values(model)
+    roots = solve_equilibria(problem, p, search, starts, seed)
+    equilibria = [problem.equilibrium(z) for z in roots]
+    for e in equilibria:
+        assess(problem, e, p)
+    equilibria.sort(key=lambda e: tuple(e.coordinates.values()) + tuple(e.rates.values()))
+    message = "" if equilibria else "no equilibrium in the search box (the equilibrium conditions have no solution there)"
+    return EquilibriaResult(equilibria, message, problem.cyclic, dict(problem.fixed_rates))

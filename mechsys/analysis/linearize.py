@@ -1,0 +1,131 @@
+"""Linearization about an equilibrium: M q'' + (C + G) q' + (K + N) q = B u, from exact symbolic derivatives."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+import sympy as sp
+
+from mechsys.mechanics.model import MechanicalModel
+from mechsys.numeric.lambdify import compile_exprs
+
+
+class LinearPieces:
+    """Compiled M, df/dq, df/du, the constraint Jacobian and d(A^T lambda)/dq of a model (t = 0), evaluated at
+    a state (q, u, lambda) for a parameter vector."""
+
+    def __init__(self, model: MechanicalModel) -> None:
+        self.model = model
+        eq = model.equations("lagrange")
+        self.n = len(model.q)
+        self.m = eq.A.shape[0]
+        self.lam = list(sp.symbols(f"lambda1:{self.m + 1}", real=True)) if self.m else []
+        t0 = {model.t: 0}
+        force = eq.f + (eq.A.T * sp.Matrix(self.lam) if self.m else sp.zeros(self.n, 1))
+        self.symbolic = {
+            "M": eq.M.xreplace(t0),
+            "dfdq": force.jacobian(model.q).xreplace(t0),
+            "dfdu": eq.f.jacobian(model.u).xreplace(t0),
+            "A": eq.A.xreplace(t0),
+        }
+        args = [*model.q, *model.u, *self.lam, *model.parameter_symbols]
+        exprs = []
+        self.layout = {}
+        for key, mat in self.symbolic.items():
+            self.layout[key] = (len(exprs), mat.shape)
+            exprs += list(mat)
+        self._fn = compile_exprs(exprs, args)
+
+    def evaluate(self, q: np.ndarray, u: np.ndarray, lam: np.ndarray, p: np.ndarray) -> dict[str, np.ndarray]:
+        out = np.asarray(self._fn(*q, *u, *lam, *p), dtype=float)
+        result = {}
+        for key, (start, shape) in self.layout.items():
+            size = shape[0] * shape[1]
+            result[key] = out[start:start + size].reshape(shape)
+        return result
+
+
+def pieces(model: MechanicalModel) -> LinearPieces:
+    """The model's LinearPieces, built once per model object."""
+    cached = getattr(model, "_linear_pieces", None)
+    if cached is None:
+        cached = LinearPieces(model)
+        model._linear_pieces = cached
+    return cached
+
+
+@dataclass
+class Linearization:
+    """Linear equations about an equilibrium over all free coordinates (constraint directions included)."""
+
+    coordinates: list[str]
+    M: np.ndarray
+    C: np.ndarray
+    G: np.ndarray
+    K: np.ndarray
+    N: np.ndarray
+    constraint_jacobian: np.ndarray
+
+    @cached_property
+    def A(self) -> np.ndarray:
+        """State matrix for the state (q, q'); requires a nonsingular M."""
+        n = len(self.coordinates)
+        Minv = np.linalg.inv(self.M)
+        return np.block([[np.zeros((n, n)), np.eye(n)], [-Minv @ (self.K + self.N), -Minv @ (self.C + self.G)]])
+
+    @cached_property
+    def B(self) -> np.ndarray:
+        """Input matrix for generalized forces on every coordinate."""
+        n = len(self.coordinates)
+        return np.vstack([np.zeros((n, n)), np.linalg.inv(self.M)])
+
+    def characteristic_polynomial(self) -> np.ndarray:
+        """Coefficients (highest power first) of det(M s^2 + (C+G) s + K + N), exactly as the book writes them."""
+        s = sp.Symbol("s")
+        mat = sp.Matrix(self.M) * s**2 + sp.Matrix(self.C + self.G) * s + sp.Matrix(self.K + self.N)
+        poly = sp.Poly(sp.expand(mat.det(method="berkowitz")), s)
+        return np.array([float(c) for c in poly.all_coeffs()], dtype=float)
+
+    def hurwitz_determinants(self) -> list[float]:
+        return hurwitz_determinants(self.characteristic_polynomial())
+
+
+def hurwitz_determinants(coeffs: np.ndarray) -> list[float]:
+    """Delta_1..Delta_n of the Hurwitz matrix of a0 s^n + a1 s^(n-1) + ... + an (a0 > 0 assumed)."""
+    a = list(coeffs)
+    n = len(a) - 1
+
+    def coef(k: int) -> float:
+        return a[k] if 0 <= k <= n else 0.0
+
+    H = np.array([[coef(2 * (j + 1) - (i + 1)) for j in range(n)] for i in range(n)], dtype=float)
+    return [float(np.linalg.det(H[:k, :k])) for k in range(1, n + 1)]
+
+
+def state_at(model: MechanicalModel, coordinates: dict[str, float], rates: dict[str, float]) -> tuple[np.ndarray, np.ndarray]:
+    q = np.array([coordinates.get(c, 0.0) for c in model.coordinates], dtype=float)
+    u = np.array([rates.get(c, 0.0) for c in model.coordinates], dtype=float)
+    return q, u
+
+
+def linearize(model: MechanicalModel, equilibrium, p: np.ndarray | None = None) -> Linearization:
+    """Linearize about an equilibrium (or steady motion): K + N = -d(f + A^T lambda)/dq, C + G = -df/du,
+    split into symmetric and skew-symmetric parts."""
+    from mechsys.analysis.equilibria import parameter_values
+
+    p = parameter_values(model) if p is None else p
+    q, u = state_at(model, equilibrium.coordinates, equilibrium.rates)
+    lam = np.array(equilibrium.multipliers, dtype=float)
+    v = pieces(model).evaluate(q, u, lam, p)
+    stiff, damp = -v["dfdq"], -v["dfdu"]
+    return Linearization(list(model.coordinates), v["M"], (damp + damp.T) / 2, (damp - damp.T) / 2,
+                         (stiff + stiff.T) / 2, (stiff - stiff.T) / 2, v["A"])
+
+
+def symbolic_matrices(model: MechanicalModel) -> dict[str, sp.Matrix]:
+    """M, C + G and K + N as expressions of the coordinates (rates at zero): valid about any state of rest."""
+    lp = pieces(model)
+    rest = {u: 0 for u in model.u}
+    return {"M": lp.symbolic["M"], "C+G": (-lp.symbolic["dfdu"]).xreplace(rest),
+            "K+N": (-lp.symbolic["dfdq"]).xreplace(rest)}

@@ -1,0 +1,233 @@
+"""Lyapunov stability of equilibria: eigenvalues first; in critical cases an energy (Lagrange-Dirichlet/Routh) test."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import scipy.linalg as sla
+import sympy as sp
+
+from mechsys.analysis.linearize import pieces, state_at
+from mechsys.numeric.lambdify import compile_exprs
+
+#: Real parts with |Re| <= ZERO_RE * max(1, max |eigenvalue|) count as zero (critical case).
+ZERO_RE = 1e-9
+#: Hessian eigenvalues with |h| <= ZERO_H * max(1, max |h|) count as zero (degenerate minimum).
+ZERO_H = 1e-9
+
+
+def reduced_pencil(problem, e) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """(A, B) with B x' = A x for the reduced linearized state, and N (tangent basis) for constrained systems.
+
+    Unconstrained: state (non-cyclic q, all rates). Constrained: state (eta, eta') with q = q0 + N eta."""
+    model = problem.model
+    q, u = state_at(model, e.coordinates, e.rates)
+    v = pieces(model).evaluate(q, u, np.array(e.multipliers), problem_parameters(problem))
+    M, dfdq, dfdu = v["M"], v["dfdq"], v["dfdu"]
+    n = len(model.coordinates)
+    if problem.m:
+        N = sla.null_space(v["A"])
+        d = N.shape[1]
+        Mr, Kr, Cr = N.T @ M @ N, -N.T @ dfdq @ N, -N.T @ dfdu @ N
+        A = np.block([[np.zeros((d, d)), np.eye(d)], [-Kr, -Cr]])
+        B = sla.block_diag(np.eye(d), Mr)
+        return A, B, N
+    nc = [model.coordinates.index(c) for c in problem.free]
+    S = np.zeros((len(nc), n))
+    for k, i in enumerate(nc):
+        S[k, i] = 1.0
+    A = np.block([[np.zeros((len(nc), len(nc))), S], [dfdq[:, nc], dfdu]])
+    B = sla.block_diag(np.eye(len(nc)), M)
+    return A, B, None
+
+
+def problem_parameters(problem) -> np.ndarray:
+    p = getattr(problem, "current_parameters", None)
+    if p is None:
+        from mechsys.analysis.equilibria import parameter_values
+
+        p = parameter_values(problem.model)
+    return p
+
+
+def eigen(A: np.ndarray, B: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+    """Finite eigenvalues of the pencil (massless coordinates give infinite ones, dropped) and the Jacobian."""
+    try:
+        J = np.linalg.solve(B, A)
+        if np.linalg.cond(B) > 1e12:
+            raise np.linalg.LinAlgError
+        vals = np.linalg.eigvals(J)
+    except np.linalg.LinAlgError:
+        J = None
+        vals = sla.eigvals(A, B)
+        vals = vals[np.isfinite(vals)]
+    order = np.lexsort((vals.imag, vals.real))
+    return vals[order], J
+
+
+def assess(problem, e, p: np.ndarray) -> None:
+    """Fill eigenvalues, Jacobian and verdict of equilibrium ``e`` in place."""
+    problem.current_parameters = p
+    A, B, _N = reduced_pencil(problem, e)
+    vals, J = eigen(A, B)
+    e.eigenvalues, e.jacobian = vals, J
+    scale = max(1.0, float(np.max(np.abs(vals)))) if len(vals) else 1.0
+    tol = ZERO_RE * scale
+    if len(vals) and np.max(vals.real) > tol:
+        e.stability, e.reason = "unstable", "an eigenvalue has a positive real part"
+        e.critical = False
+        return
+    if len(vals) == 0 or np.max(vals.real) < -tol:
+        e.stability, e.reason = "asymptotically stable", "all eigenvalues have negative real parts"
+        return
+    e.critical = True
+    zero = int(np.sum(np.abs(vals.real) <= tol))
+    e.stability, e.reason = energy_verdict(problem, e, p, zero)
+
+
+# ----------------------------------------------------------------------------------------- energy argument
+def energy_verdict(problem, e, p: np.ndarray, zero_count: int) -> tuple[str, str]:
+    """Critical case: with only dissipative (or no) non-conservative forces, a strict minimum of the effective
+    potential (V - T0, amended by Routh for cyclic momenta) is stable (Lagrange-Dirichlet); no minimum with
+    complete damping is unstable (Kelvin-Tait-Chetaev). Otherwise undecided, with the reason."""
+    model = problem.model
+    prefix = f"{zero_count} eigenvalue(s) with zero real part (critical case); "
+    dissipative, complete, why, positional = _dissipation(problem, e, p)
+    if not dissipative:
+        return "undecided", prefix + why
+    U, qn = _effective_potential(problem, e)
+    q0 = np.array([e.coordinates[c] for c in problem.free], dtype=float)
+    if not qn:
+        return "stable", prefix + "no positional degrees of freedom and no energy input"
+    H = _hessian(U, qn, problem, q0, p) - positional  # curl-free positional forces belong to the potential
+    if problem.m:
+        H = _constrained_hessian(problem, e, p, H)
+    h = np.linalg.eigvalsh((H + H.T) / 2) if H.size else np.zeros(0)
+    htol = ZERO_H * max(1.0, float(np.max(np.abs(h)))) if h.size else 0.0
+    if h.size == 0 or np.min(h) > htol:
+        return "stable", prefix + "energy argument: strict minimum of the effective potential and no energy input " \
+                                  "(Lagrange-Dirichlet), so stable but not asymptotically"
+    if np.min(h) < -htol:
+        if complete:
+            return "unstable", prefix + "the effective potential has no minimum and the damping is complete " \
+                                        "(Kelvin-Tait-Chetaev)"
+        return "undecided", prefix + "the effective potential has no minimum; without complete damping " \
+                                     "gyroscopic forces may still stabilize"
+    null = np.linalg.eigh((H + H.T) / 2)[1][:, np.abs(h) <= htol]
+    if null.shape[1] == 1 and not problem.m:
+        order, value = _higher_order(U, qn, problem, q0, p, null[:, 0])
+        if order and order % 2 == 0 and value > 0:
+            return "stable", prefix + f"energy argument: the effective potential has a strict minimum (order-{order} " \
+                                      "term positive along the degenerate direction); stable, not asymptotically"
+        if order:
+            if complete:
+                return "unstable", prefix + f"the effective potential has no minimum (order-{order} term along the " \
+                                            "degenerate direction) and the damping is complete"
+            return "undecided", prefix + "the effective potential has no minimum along the degenerate direction"
+    return "undecided", prefix + "the potential is flat along some direction (neutral equilibrium or a family)"
+
+
+def _dissipation(problem, e, p: np.ndarray) -> tuple[bool, bool, str, np.ndarray]:
+    """(non-conservative forces only dissipate, damping complete on the positional coordinates, reason if not,
+    dQ0/dq at the equilibrium for curl-free positional forces Q0 = Q(q, 0) such as a righting moment)."""
+    model = problem.model
+    nq = len(problem.free)
+    Q = model.generalized_forces
+    none = np.zeros((nq, nq))
+    if Q == sp.zeros(*Q.shape):
+        return True, False, "", none
+    rng = np.random.default_rng(4)
+    everything = list(model.q) + list(model.u) + list(model.parameter_symbols)
+    Qt = Q.xreplace({model.t: 0})
+    for c in problem.cyclic:
+        i = model.coordinates.index(c)
+        if Qt[i] != 0:
+            fn = compile_exprs([Qt[i]], everything)
+            n = len(model.q)
+            if any(abs(fn(*rng.uniform(-2, 2, 2 * n), *p)[0]) > 1e-12 for _ in range(3)):
+                return False, False, f"a force acts on the cyclic coordinate {c}, so its momentum is not conserved", none
+    rest = {u: 0 for u in model.u}
+    rest[model.t] = 0
+    nc = [model.coordinates.index(c) for c in problem.free]
+    qn = [model.q[i] for i in nc]
+    Q0 = sp.Matrix([Q[i] for i in nc]).xreplace(rest)
+    args = list(model.q) + list(model.parameter_symbols)
+    J0 = compile_exprs(list(Q0.jacobian(qn)), args)
+    for _ in range(3):
+        Jr = np.array(J0(*rng.uniform(-2, 2, len(model.q)), *p), dtype=float).reshape(nq, nq)
+        if np.max(np.abs(Jr - Jr.T)) > 1e-9 * max(1.0, np.max(np.abs(Jr))):
+            return False, False, "circulatory (non-conservative positional) forces act, so no energy argument", none
+    q, u = state_at(model, e.coordinates, e.rates)
+    positional = np.array(J0(*q, *p), dtype=float).reshape(nq, nq)
+    dQdu = Q.jacobian(model.u).xreplace({model.t: 0})
+    D = -np.array(compile_exprs(list(dQdu), list(model.q) + list(model.u) + list(model.parameter_symbols))(
+        *q, *u, *p), dtype=float).reshape(len(model.q), len(model.q))
+    D = (D + D.T) / 2
+    Dn = D[np.ix_(nc, nc)]
+    if np.min(np.linalg.eigvalsh(D)) < -1e-12 * max(1.0, np.max(np.abs(D))):
+        return False, False, "the velocity-dependent forces can feed energy in", none
+    complete = bool(Dn.size and np.min(np.linalg.eigvalsh(Dn)) > 1e-12 * max(1.0, np.max(np.abs(Dn))))
+    if problem.m:
+        complete = False
+    return True, complete, "", (positional + positional.T) / 2
+
+
+def _effective_potential(problem, e) -> tuple[sp.Expr, list[sp.Symbol]]:
+    """U = V - T0 (rates of non-cyclic coordinates at zero), plus Routh's term for conserved cyclic momenta."""
+    model = problem.model
+    T, V = model.kinetic_energy, model.potential_energy
+    rest_nc = {model.doc.rates[c]: 0 for c in problem.free}
+    cyc_u = [model.doc.rates[c] for c in problem.cyclic]
+    all_rest = {**rest_nc, **{u: 0 for u in cyc_u}, model.t: 0}
+    U = V.xreplace({model.t: 0}) - T.xreplace(all_rest)
+    if cyc_u:
+        Tc = T.xreplace({**rest_nc, model.t: 0})
+        Mcc = sp.hessian(Tc, cyc_u)
+        b = sp.Matrix([sp.diff(Tc, u) for u in cyc_u]).xreplace({u: 0 for u in cyc_u})
+        # conserved momenta p = Mcc u_c + b at the steady motion, as numbers
+        q0 = {model.doc.coords[c]: e.coordinates[c] for c in problem.free}
+        q0.update({model.doc.coords[c]: 0 for c in problem.cyclic})
+        values = dict(zip(model.parameter_symbols, problem_parameters(problem)))
+        uc = sp.Matrix([e.rates[c] for c in problem.cyclic])
+        pmom = (Mcc * uc + b).xreplace(q0).xreplace(values).evalf()
+        U = U + ((pmom - b).T * Mcc.inv() * (pmom - b))[0] / 2  # inverse of the small cyclic block only
+        U = U.xreplace({model.doc.coords[c]: 0 for c in problem.cyclic})
+    qn = [model.doc.coords[c] for c in problem.free]
+    return U, qn
+
+
+def _hessian(U: sp.Expr, qn: list, problem, q0: np.ndarray, p: np.ndarray) -> np.ndarray:
+    H = sp.hessian(U, qn)
+    fn = compile_exprs(list(H), qn + list(problem.model.parameter_symbols))
+    return np.array(fn(*q0, *p), dtype=float).reshape(len(qn), len(qn))
+
+
+def _constrained_hessian(problem, e, p: np.ndarray, H: np.ndarray) -> np.ndarray:
+    """N^T (Hess U - sum lambda_k Hess Phi_k) N on the constraint manifold's tangent space."""
+    model = problem.model
+    qn = [model.doc.coords[c] for c in problem.free]
+    Phi = model.holonomic_constraints.xreplace({model.t: 0})
+    total = np.array(H)
+    q0 = np.array([e.coordinates[c] for c in problem.free], dtype=float)
+    for k in range(Phi.shape[0]):
+        Hk = _hessian(Phi[k], qn, problem, q0, p)
+        total = total - e.multipliers[k] * Hk
+    _A, _B, N = reduced_pencil(problem, e)
+    return N.T @ total @ N
+
+
+def _higher_order(U: sp.Expr, qn: list, problem, q0: np.ndarray, p: np.ndarray, v: np.ndarray) -> tuple[int, float]:
+    """First non-vanishing derivative (order 3..6) of U along q0 + s v at s = 0."""
+    s = sp.Symbol("s_dir", real=True)
+    line = U.xreplace({q: float(q0[i]) + float(v[i]) * s for i, q in enumerate(qn)})
+    line = line.xreplace(dict(zip(problem.model.parameter_symbols, [float(x) for x in p])))
+    deriv = sp.diff(line, s, 2)
+    terms = []
+    for order in range(3, 7):
+        deriv = sp.diff(deriv, s)
+        terms.append((order, float(deriv.xreplace({s: 0}).evalf()) / math.factorial(order)))
+    scale = max(abs(c) for _, c in terms)
+    for order, coeff in terms:
+        if scale > 0 and abs(coeff) > 1e-6 * scale:
+            return order, coeff
+    return 0, 0.0
