@@ -27,7 +27,9 @@ class InputError(MechsysError):
         if self.file:
             where = f"{self.file}:{self.line or 1}:{self.col or 1}: "
         key = f"{self.path}: " if self.path else ""
-        return f"{where}{key}{self.message}".replace("\n", " ")
+        text = f"{where}{key}{self.message}"
+        # one line, whatever the file contained: escape line breaks and other control characters
+        return "".join(c if c.isprintable() else c.encode("unicode_escape").decode("ascii") for c in text)
 
 
 class AnalysisError(MechsysError):

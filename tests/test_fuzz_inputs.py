@@ -38,6 +38,9 @@ JUNK_NAMES = ["t", "pi", "ground", "com", "origin", "gg", "nosuch", "_", "__impo
               "os", "eval", "é"]
 JUNK_CHARS = [".", "'", '"', "[", "]", "{", "}", ":", ";", "%", "=", "==", "<", "!", "@", "#", "&", "|", "~", "`",
               "\\", "$", "?", "\t", "\n", " ", ""]
+# literals that are valid YAML/expressions but not usable numbers (Python refuses int('9' * 5000) by default)
+HUGE_LITERALS = ["9" * 5000, "-" + "1" * 4400, "1e999", "-1e999", ".inf", "-.inf", ".nan", "1e308*1e308", "0**-1",
+                 "log(0)", "(-8)**(1/3)", "sqrt(-1)"]
 KEYS = ["name", "description", "parameters", "coordinates", "ground", "links", "constraints", "forces", "type",
         "parent", "origin", "axis", "axes", "coordinate", "coordinates", "mass", "center_of_mass", "inertia",
         "inertia_about", "shape", "points", "particle", "joint", "initial", "rate", "prescribed", "angle", "xx",
@@ -266,7 +269,7 @@ def mutate_text(text: str, draw, names: list[str]) -> tuple[str, str]:
         return "".join(lines), f"insert an expression line before {i + 1}"
     m = draw(st.sampled_from(words))
     new = draw(st.one_of(misspell(m.group()), st.sampled_from(names), st.sampled_from(KEYS),
-                         expressions(names)))
+                         expressions(names), st.sampled_from(HUGE_LITERALS)))
     lines[i] = lines[i][:m.start()] + new + lines[i][m.end():]
     return "".join(lines), f"line {i + 1}: {m.group()!r} -> {new!r}"
 
@@ -312,7 +315,7 @@ def check_file(path: Path) -> dict:
     except InputError as exc:
         text = str(exc)
         problems = []
-        if "\n" in text or "\r" in text:
+        if len(text.splitlines()) != 1:  # also \r, \x85, \u2028... which terminals and editors break on
             problems.append("str() is not one line")
         if exc.file != str(path):
             problems.append(f"file is {exc.file!r}, expected {str(path)!r}")

@@ -229,6 +229,10 @@ CASES: list[Case] = [
          "links.arm.joint.axs", "did you mean 'axis'"),
     Case("unknown-coordinate-key-inital", sub("    rate: -2.5", "    inital: 1\n    rate: -2.5"), "inital: 1",
          "inital", "coordinates.beta.inital", "did you mean 'initial'"),
+    Case("unknown-key-with-carriage-return", sub("    mass: m\n", "    \"ma\\rss\": m\n"), "ma\\rss", None, None,
+         "unknown key"),
+    Case("unknown-key-with-line-separator", sub("    mass: m\n", "    \"ma\\Lss\": m\n"), "ma\\Lss", None, None,
+         "unknown key"),
     Case("unknown-inertia-key-xxx", sub("      xx: I2x", "      xxx: I2x"), "xxx: I2x", "xxx",
          "links.arm.inertia.xxx", "unknown key 'xxx'"),
     # ------------------------------------------------------------------ wrong types
@@ -417,6 +421,28 @@ CASES: list[Case] = [
          "__builtins__", "links.arm.mass", "unknown name '__builtins__'"),
     Case("security-subscript", sub("    mass: m\n", "    mass: m[0]\n"), "mass: m[0]", None, "links.arm.mass",
          "unexpected character '['"),
+    # ------------------------------------------------------------------ values that are not finite real numbers
+    Case("yaml-integer-5000-digits-parameter", sub("  k: 100\n", f"  k: {'9' * 5000}\n"), "k: 999", None,
+         "parameters.k", ("too large", "digits", "finite")),
+    Case("yaml-integer-5000-digits-mass", sub("    mass: m\n", f"    mass: {'9' * 5000}\n"), "mass: 999", None,
+         "links.arm.mass", ("too large", "digits", "finite")),
+    Case("mass-log-zero", sub("    mass: m\n", "    mass: log(0)\n"), "mass: log(0)", None, "links.arm.mass",
+         ("finite", "real", "infinit")),
+    Case("mass-zero-to-negative-power", sub("    mass: m\n", "    mass: 0**-1\n"), "mass: 0**-1", None,
+         "links.arm.mass", ("finite", "real", "infinit", "division by zero")),
+    Case("mass-complex", sub("    mass: m\n", "    mass: (-8)**(1/3)\n"), "mass: (-8)", None, "links.arm.mass",
+         ("real", "complex")),
+    Case("joint-axis-zero-after-parameters", sub("      axis: x\n", "      axis: [a - 0.3, 0, 0]\n"),
+         "axis: [a - 0.3", None, "links.arm.joint.axis", "zero"),
+    Case("joint-axis-complex", sub("      axis: x\n", "      axis: [sqrt(-1), 0, 1]\n"), "axis: [sqrt(-1)", None,
+         "links.arm.joint.axis", ("real", "complex")),
+    Case("line-direction-zero-after-parameters",
+         append("constraints:\n  - type: point_on_line\n    point: arm.tip\n    through: ground\n"
+                "    direction: [a - 0.3, 0, 0]\n"), "direction: [a - 0.3", None, "constraints[0].direction", "zero"),
+    Case("line-direction-complex",
+         append("constraints:\n  - type: point_on_line\n    point: arm.tip\n    through: ground\n"
+                "    direction: [sqrt(-1), 0, 1]\n"), "direction: [sqrt(-1)", None, "constraints[0].direction",
+         ("real", "complex")),
 ]
 
 
@@ -446,7 +472,7 @@ def assert_one_line_error(result, *, stdout: str | None = None, stderr: str | No
     assert exit_code == 2, detail
     assert "Traceback" not in out + err, detail
     assert out == "", detail
-    assert err.endswith("\n") and err.count("\n") == 1, detail
+    assert err.endswith("\n") and len(err.splitlines()) == 1, detail  # no \r, \x85, \u2028 inside either
     return err.rstrip("\n")
 
 

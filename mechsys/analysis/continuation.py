@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Callable, Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
 from scipy.optimize import brentq
@@ -469,7 +469,7 @@ def _on_branch(cont: _Continuation, branch: Branch, z: np.ndarray) -> bool:
 
 
 def sweep_parameter(F: ArrayFn, Fx: ArrayFn, Fp: ArrayFn, starts: list[tuple[np.ndarray, float]], p_min: float,
-                    p_max: float, eig: ArrayFn, **kw) -> list[Branch]:
+                    p_max: float, eig: ArrayFn, **kw: Any) -> list[Branch]:
     """Trace each start both ways (direction -1 and +1) and merge the two halves into one branch along the arc.
 
     The merged points run from the end of the direction -1 half, through the start, to the end of the +1 half;

@@ -4,6 +4,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
+import numpy as np
 import sympy as sp
 
 from mechsys.mechanics.kinematics import AXES, FrameState, unit
@@ -80,11 +81,25 @@ class Builder:
         if isinstance(value, str):
             return sp.Matrix(AXES[value])
         vec = self.doc.parse_vec(value, path, "kinematic")
-        if all(e == 0 for e in vec):
-            raise self.doc.error(path, "axis must not be the zero vector")
         if vec.free_symbols - set(self.doc.parameters.values()):
             raise self.doc.error(path, "an axis may depend on parameters only")
+        values = [self.real_value(e, path) for e in vec]
+        if max(abs(x) for x in values) == 0:
+            raise self.doc.error(path, "axis must not be the zero vector (with the file's parameter values)")
         return unit(vec)
+
+    def real_value(self, expr: sp.Expr, path: Path, nonnegative: bool = False) -> float:
+        """The value of a parameter-only expression; it must be a finite real number."""
+        try:
+            values = {k: sp.Float(v) for k, v in self.doc.numeric_parameters().items()}
+            val = complex(sp.sympify(expr).xreplace(values).evalf())
+        except (TypeError, ValueError, ZeroDivisionError):
+            raise self.doc.error(path, "does not evaluate to a number") from None
+        if abs(val.imag) > 1e-12 * max(1.0, abs(val.real)) or not np.isfinite(val.real):
+            raise self.doc.error(path, "must evaluate to a finite real number")
+        if nonnegative and val.real < 0:
+            raise self.doc.error(path, "must not be negative")
+        return val.real
 
     def frame(self, name: str, path: Path) -> FrameState:
         if name == "ground":
@@ -305,7 +320,10 @@ class Builder:
                 if reserved in spec.points:
                     raise self.doc.error(lp + ("points", reserved), f"{reserved!r} is a reserved point name", key=True)
             m = self.doc.parse(spec.mass, lp + ("mass",), "parameter")
+            self.real_value(m, lp + ("mass",), nonnegative=True)
             com = self.doc.parse_vec(spec.center_of_mass, lp + ("center_of_mass",), "parameter")
+            for i, c in enumerate(com):
+                self.real_value(c, lp + ("center_of_mass", i))
             if spec.particle and (spec.inertia is not None or spec.shape is not None):
                 raise self.doc.error(lp + ("inertia" if spec.inertia is not None else "shape",),
                                      "a particle has no inertia tensor or shape")
@@ -316,6 +334,8 @@ class Builder:
                 ip = lp + ("inertia",)
                 c = {k: self.doc.parse(getattr(spec.inertia, k), ip + (k,), "parameter")
                      for k in ("xx", "yy", "zz", "xy", "xz", "yz")}
+                for k, v in c.items():
+                    self.real_value(v, ip + (k,), nonnegative=k in ("xx", "yy", "zz"))
                 inertia = sp.Matrix([[c["xx"], -c["xy"], -c["xz"]],
                                      [-c["xy"], c["yy"], -c["yz"]],
                                      [-c["xz"], -c["yz"], c["zz"]]])

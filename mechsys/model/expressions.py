@@ -79,6 +79,8 @@ def _tokenize(text: str) -> list[_Tok]:
 
 
 def _number(text: str) -> sp.Expr:
+    if len(text.split("e")[0].split("E")[0]) > 300:
+        raise ExpressionError("number too large")
     if re.fullmatch(r"\d+", text):
         return sp.Integer(int(text))
     # Decimal literals become exact rationals so textbook formulas stay exact.
@@ -261,6 +263,8 @@ def parse_expression(
     if isinstance(text, bool):
         raise ExpressionError("expected a number or an expression, got a boolean")
     if isinstance(text, int):
+        if abs(text) > 10**300:
+            raise ExpressionError("number too large")
         return sp.Integer(text)
     if isinstance(text, float):
         if text != text or text in (float("inf"), float("-inf")):

@@ -65,7 +65,11 @@ class _Builder:
             return out
         if isinstance(node, yaml.SequenceNode):
             return [self.build(item, path + (i,)) for i, item in enumerate(node.value)]
-        value = self.loader.construct_object(node, deep=True)
+        try:
+            value = self.loader.construct_object(node, deep=True)
+        except ValueError:  # e.g. an integer with thousands of digits
+            line, col = _mark(node)
+            raise InputError("number too large", self.file, line, col, _dotted(path)) from None
         if isinstance(value, (bytes, bytearray)) or type(value).__module__ == "datetime":
             line, col = _mark(node)
             raise InputError("unsupported YAML value type; use numbers or strings", self.file, line, col,

@@ -25,6 +25,10 @@ class _Printer(PythonCodePrinter):
 
     _print_Dummy = _print_Symbol
 
+    def _print_DiracDelta(self, expr: sp.Expr) -> str:
+        # derivative of sign(x) in |x| (e.g. a 1-D spring length): zero except at the singular point itself
+        return "0.0"
+
 
 def compile_exprs(exprs: Sequence[sp.Expr], args: Sequence[sp.Symbol]) -> Callable[..., list[float]]:
     """A function of ``args`` returning the list of ``exprs`` as floats (shared subexpressions computed once)."""

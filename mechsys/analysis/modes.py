@@ -1,0 +1,171 @@
+"""Linear vibration about an equilibrium: natural frequencies, damping ratios, mass-normalised modes, FRF."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.linalg as sla
+
+from mechsys.analysis.equilibria import Equilibrium, EquilibriumProblem, _polish, find_equilibria, parameter_values
+from mechsys.analysis.linearize import Linearization, linearize
+from mechsys.errors import AnalysisError, InputError
+from mechsys.mechanics.model import MechanicalModel
+
+#: omega^2 below RIGID * max(omega^2) (or absolutely tiny) marks a rigid-body (zero-frequency) mode.
+RIGID = 1e-9
+
+
+@dataclass
+class Modes:
+    coordinates: list[str]
+    equilibrium: Equilibrium
+    frequencies: np.ndarray
+    shapes: np.ndarray
+    rigid_body: list[bool]
+    damping_ratios: np.ndarray
+    eigenvalues: np.ndarray
+    condensed: list[str] = field(default_factory=list)
+    unstable_modes: int = 0
+    system: "ReducedSystem | None" = None
+
+    @property
+    def frequencies_hz(self) -> np.ndarray:
+        return self.frequencies / (2 * np.pi)
+
+    def to_dict(self) -> dict:
+        return {
+            "coordinates": self.coordinates,
+            "equilibrium": {"coordinates": self.equilibrium.coordinates, "rates": self.equilibrium.rates},
+            "modes": [{"frequency_rad_s": float(w), "frequency_hz": float(w / (2 * np.pi)),
+                       "damping_ratio": float(z), "rigid_body": bool(r),
+                       "shape": {c: float(self.shapes[i, k]) for i, c in enumerate(self.coordinates)}}
+                      for k, (w, z, r) in enumerate(zip(self.frequencies, self.damping_ratios, self.rigid_body))],
+            "eigenvalues": [[float(v.real), float(v.imag)] for v in self.eigenvalues],
+            "condensed": self.condensed,
+        }
+
+
+@dataclass
+class ReducedSystem:
+    """M, C (incl. gyroscopic), K (incl. circulatory) on independent coordinates, and the map back T (full = T r)."""
+
+    M: np.ndarray
+    C: np.ndarray
+    K: np.ndarray
+    T: np.ndarray
+    names: list[str]
+
+    def receptance(self, omega: float, lin: Linearization) -> np.ndarray:
+        """H(omega) = (K - omega^2 M + i omega C)^-1 on the full coordinates (massless ones included)."""
+        Z = (lin.K + lin.N) - omega**2 * lin.M + 1j * omega * (lin.C + lin.G)
+        return np.linalg.inv(Z)
+
+    def state_space(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        n = self.M.shape[0]
+        Minv = np.linalg.inv(self.M)
+        A = np.block([[np.zeros((n, n)), np.eye(n)], [-Minv @ self.K, -Minv @ self.C]])
+        B = np.vstack([np.zeros((n, n)), Minv @ self.T.T])
+        Cout = np.hstack([self.T, np.zeros((self.T.shape[0], n))])
+        return A, B, Cout, np.zeros((self.T.shape[0], self.T.shape[0]))
+
+
+def _equilibrium(model: MechanicalModel, at: dict[str, float] | None) -> Equilibrium:
+    if at is None:
+        res = find_equilibria(model)
+        if not res.equilibria:
+            raise AnalysisError("no equilibrium found to vibrate about; give one with --at")
+        stable = [e for e in res.equilibria if e.stability in ("asymptotically stable", "stable")]
+        return (stable or res.equilibria)[0]
+    problem = EquilibriumProblem(model)
+    unknown = set(at) - set(problem.free) - set(problem.rate_unknowns)
+    if unknown:
+        raise InputError(f"--at: {', '.join(sorted(unknown))} is not a free coordinate "
+                         f"(choose from {', '.join(problem.free)})")
+    p = parameter_values(model)
+    start = np.array([at.get(c, model.doc.initial.get(c, 0.0)) for c in problem.free]
+                     + [at.get(c, model.doc.initial_rate.get(c, 0.0)) for c in problem.rate_unknowns]
+                     + [0.0] * problem.m)
+    z = _polish(problem, start, p)
+    if z is None or problem.distance(z, start) > 1e-6 * (1 + np.linalg.norm(start)):
+        raise AnalysisError("--at is not an equilibrium (the equilibrium equations are not satisfied there)")
+    from mechsys.analysis.stability import assess
+
+    e = problem.equilibrium(z)
+    assess(problem, e, p)
+    return e
+
+
+def reduce(model: MechanicalModel, lin: Linearization) -> tuple[ReducedSystem, list[str]]:
+    """Remove constraint directions (null space of the constraint Jacobian), then statically condense massless
+    coordinates (their rows of M vanish): T = [I; -Kss^-1 Ksr] on (retained, massless)."""
+    n = len(lin.coordinates)
+    Kfull, Cfull = lin.K + lin.N, lin.C + lin.G
+    base = sla.null_space(lin.constraint_jacobian) if lin.constraint_jacobian.shape[0] else np.eye(n)
+    M, K, C = base.T @ lin.M @ base, base.T @ Kfull @ base, base.T @ Cfull @ base
+    names = list(lin.coordinates) if lin.constraint_jacobian.shape[0] == 0 else [f"eta{k + 1}" for k in range(M.shape[0])]
+    scale = max(1e-300, float(np.max(np.abs(M)))) if M.size else 1.0
+    massless = [i for i in range(M.shape[0]) if np.max(np.abs(M[i, :])) <= 1e-12 * scale]
+    condensed = [names[i] for i in massless]
+    if massless:
+        keep = [i for i in range(M.shape[0]) if i not in massless]
+        Kss = K[np.ix_(massless, massless)]
+        try:
+            G = -np.linalg.solve(Kss, K[np.ix_(massless, keep)])
+        except np.linalg.LinAlgError:
+            raise AnalysisError("massless coordinates without stiffness: static condensation impossible") from None
+        Tc = np.zeros((M.shape[0], len(keep)))
+        Tc[keep, range(len(keep))] = 1.0
+        Tc[massless, :] = G
+        M, C, K = Tc.T @ M @ Tc, Tc.T @ C @ Tc, Tc.T @ K @ Tc
+        base = base @ Tc
+        names = [names[i] for i in keep]
+    return ReducedSystem(M, C, K, base, names), condensed
+
+
+def vibration_modes(model: MechanicalModel, at: dict[str, float] | None = None) -> Modes:
+    """Modes about ``at`` (polished to an exact equilibrium) or about the first stable equilibrium."""
+    e = _equilibrium(model, at)
+    lin = linearize(model, e)
+    red, condensed = reduce(model, lin)
+    Ks = (red.K + red.K.T) / 2
+    try:
+        w2, phi = sla.eigh(Ks, red.M)
+    except (np.linalg.LinAlgError, ValueError):
+        raise AnalysisError("the reduced mass matrix is not positive definite") from None
+    top = max(1.0, float(np.max(np.abs(w2)))) if w2.size else 1.0
+    rigid = [bool(abs(x) <= RIGID * top) for x in w2]
+    unstable = int(sum(1 for x, r in zip(w2, rigid) if x < 0 and not r))
+    freqs = np.sqrt(np.clip(w2, 0.0, None))
+    freqs[rigid] = 0.0
+    for k in range(phi.shape[1]):  # sign convention: the largest component is positive
+        j = int(np.argmax(np.abs(phi[:, k])))
+        if phi[j, k] < 0:
+            phi[:, k] = -phi[:, k]
+    shapes = red.T @ phi
+    n = red.M.shape[0]
+    A = np.block([[np.zeros((n, n)), np.eye(n)], [-red.K, -red.C]])
+    B = sla.block_diag(np.eye(n), red.M)
+    vals = sla.eigvals(A, B)
+    vals = vals[np.isfinite(vals)]
+    vals = vals[np.lexsort((vals.imag, np.abs(vals)))]
+    zeta = np.zeros(len(freqs))
+    pool = [v for v in vals if v.imag >= -1e-12 * max(1.0, abs(v))]
+    for k, w in enumerate(freqs):
+        if rigid[k] or not pool:
+            continue
+        j = int(np.argmin([abs(abs(v) - w) for v in pool]))
+        v = pool.pop(j)
+        zeta[k] = -v.real / abs(v) if abs(v) > 0 else 0.0
+    names = list(lin.coordinates)
+    return Modes(names, e, freqs, shapes, rigid, zeta, vals, condensed, unstable, red)
+
+
+def frf(model: MechanicalModel, modes: Modes, omegas: np.ndarray, inp: str, out: str) -> np.ndarray:
+    """Receptance H_out,in(omega) (complex) at each omega, from the full linearization."""
+    lin = linearize(model, modes.equilibrium)
+    names = lin.coordinates
+    for name in (inp, out):
+        if name not in names:
+            raise InputError(f"unknown coordinate {name!r} for --frf (choose from {', '.join(names)})")
+    i, o = names.index(inp), names.index(out)
+    return np.array([modes.system.receptance(w, lin)[o, i] for w in omegas])
