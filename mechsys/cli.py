@@ -168,6 +168,199 @@ def info(
     run(body)
 
 
+class TableFormat(str, Enum):
+    text = "text"
+    json = "json"
+    csv = "csv"
+    markdown = "markdown"
+    latex = "latex"
+
+
+def emit_tables(tables, fmt: "TableFormat", output: Optional[Path], payload: dict | None = None) -> None:
+    from mechsys.report.tables import render_tables
+
+    rendered = render_tables(tables, fmt.value, payload)
+    if isinstance(rendered, str):
+        emit(rendered, output)
+        return
+    from rich.console import Console
+
+    if output is None:
+        Console().print(rendered)
+    else:
+        console = Console(record=True, width=160, file=open(os.devnull, "w"))
+        console.print(rendered)
+        write_atomic(output, console.export_text())
+
+
+def parse_ranges(items: Optional[List[str]], option: str, count: bool = False) -> dict:
+    """NAME=LO:HI (or NAME=START:STOP:N with count) into {name: (lo, hi[, n])}."""
+    out = {}
+    for item in items or []:
+        name, sep, rest = item.partition("=")
+        parts = rest.split(":")
+        try:
+            if not sep or len(parts) != (3 if count else 2) or not name.strip():
+                raise ValueError
+            values = [float(x) for x in parts[:2]]
+            if count:
+                values.append(int(parts[2]))
+                if values[2] < 2:
+                    raise ValueError
+        except ValueError:
+            form = "NAME=START:STOP:N (N >= 2)" if count else "NAME=LO:HI"
+            raise InputError(f"{option} {item!r}: expected {form}") from None
+        out[name.strip()] = tuple(values)
+    return out
+
+
+@app.command()
+def equilibria(
+    file: Path = typer.Argument(..., help="Model file (YAML)."),
+    search: Optional[List[str]] = typer.Option(None, "--search", metavar="NAME=LO:HI",
+                                               help="Search box of a coordinate or cyclic rate (angles: (-pi, pi])."),
+    sweep_: Optional[str] = typer.Option(None, "--sweep", metavar="NAME=START:STOP:N",
+                                         help="Follow every branch as parameter NAME varies (continuation)."),
+    plot: Optional[Path] = typer.Option(None, "--plot", help="With --sweep: bifurcation diagram (.png, .svg)."),
+    plot_coordinate: Optional[str] = typer.Option(None, "--plot-coordinate", help="Coordinate on the diagram's axis."),
+    linearize_: bool = typer.Option(False, "--linearize", help="Print M, C, G, K, N and A, B about each equilibrium."),
+    numeric: bool = typer.Option(False, "--numeric", help="With --linearize: numbers at each equilibrium "
+                                                          "(default: expressions, then numbers)."),
+    hurwitz: bool = typer.Option(False, "--hurwitz", help="Characteristic polynomial and Routh-Hurwitz conditions."),
+    fmt: TableFormat = typer.Option(TableFormat.text, "--format", "-f", help="Output format."),
+    set_: Optional[List[str]] = SetOption,
+    output: Optional[Path] = OutputOption,
+) -> None:
+    """Equilibria and steady motions, their Lyapunov stability, and (with --sweep) bifurcations."""
+
+    def body() -> int:
+        from mechsys.analysis.equilibria import find_equilibria
+        from mechsys.report import equilibria as rep
+
+        boxes = parse_ranges(search, "--search")
+        sweep_spec = parse_ranges([sweep_], "--sweep", count=True) if sweep_ else {}
+        if plot is not None and not sweep_spec:
+            raise InputError("--plot needs --sweep")
+        model = load_model(file, set_)
+        result = find_equilibria(model, boxes)
+        tables = rep.equilibria_tables(result)
+        bifurcations: list = []
+        if sweep_spec:
+            from mechsys.analysis.bifurcation import plot_sweep, sweep
+
+            (name, (start, stop, n)), = sweep_spec.items()
+            swept = sweep(model, name, start, stop, int(n), boxes)
+            bifurcations = swept.bifurcations
+            tables += rep.sweep_tables(swept)
+            if plot is not None:
+                plot_sweep(swept, str(plot), plot_coordinate)
+        if linearize_ or hurwitz:
+            from mechsys.analysis.linearize import linearize, symbolic_matrices
+
+            if linearize_ and not numeric:
+                tables += rep.symbolic_tables(symbolic_matrices(model), model.coordinates)
+            for k, e in enumerate(result.equilibria, start=1):
+                lin = linearize(model, e)
+                label = f"equilibrium {k}"
+                tables += rep.linearization_tables(lin, label, hurwitz) if linearize_ else rep.hurwitz_tables(lin, label)
+        payload = rep.equilibria_payload(result, bifurcations)
+        if sweep_spec and fmt == TableFormat.csv:
+            branch_table = [t for t in tables if t.title.startswith("branches")]
+            emit_tables(branch_table, fmt, output)
+        else:
+            emit_tables(tables, fmt, output, payload)
+        return 0
+
+    run(body)
+
+
+@app.command()
+def modes(
+    file: Path = typer.Argument(..., help="Model file (YAML)."),
+    at: Optional[List[str]] = typer.Option(None, "--at", metavar="NAME=VALUE",
+                                           help="Equilibrium to vibrate about (default: the first stable one)."),
+    frf: Optional[str] = typer.Option(None, "--frf", metavar="START:STOP:N",
+                                      help="Receptance over a frequency range [rad/s]."),
+    frf_input: Optional[str] = typer.Option(None, "--input", help="FRF: coordinate the force acts on."),
+    frf_output: Optional[str] = typer.Option(None, "--response", help="FRF: coordinate observed."),
+    plot: Optional[Path] = typer.Option(None, "--plot", help="Mode shapes (or, with --frf, the FRF) as .png/.svg."),
+    state_space: bool = typer.Option(False, "--state-space", help="Print the state-space matrices A, B, C, D."),
+    transfer: bool = typer.Option(False, "--transfer", help="Transfer function from --input to --response."),
+    fmt: TableFormat = typer.Option(TableFormat.text, "--format", "-f", help="Output format."),
+    set_: Optional[List[str]] = SetOption,
+    output: Optional[Path] = OutputOption,
+) -> None:
+    """Linear vibration: natural frequencies, damping ratios, mass-normalised modes, FRF, state space."""
+
+    def body() -> int:
+        from mechsys.analysis import modes as modal
+        from mechsys.report import equilibria as rep
+        from mechsys.report.tables import Table
+
+        point = {}
+        for item in at or []:
+            name, sep, value = item.partition("=")
+            try:
+                point[name.strip()] = float(value)
+            except ValueError:
+                raise InputError(f"--at {item!r}: expected NAME=VALUE with a number") from None
+            if not sep:
+                raise InputError(f"--at {item!r}: expected NAME=VALUE")
+        frf_range = None
+        if frf:
+            parts = frf.split(":")
+            try:
+                frf_range = (float(parts[0]), float(parts[1]), int(parts[2]))
+                if len(parts) != 3 or frf_range[2] < 2:
+                    raise ValueError
+            except (ValueError, IndexError):
+                raise InputError(f"--frf {frf!r}: expected START:STOP:N (N >= 2)") from None
+        model = load_model(file, set_)
+        result = modal.vibration_modes(model, point or None)
+        tables = rep.modes_tables(result)
+        payload = result.to_dict()
+        inp = frf_input or result.coordinates[0]
+        out = frf_output or inp
+        if frf_range is not None:
+            import numpy as np
+
+            omegas = np.linspace(*frf_range)
+            H = modal.frf(model, result, omegas, inp, out)
+            t = Table(f"receptance {out}/{inp}", ["omega [rad/s]", "magnitude", "phase [rad]"])
+            for w, h in zip(omegas, H):
+                t.add(float(w), float(abs(h)), float(np.angle(h)))
+            tables = [t] if fmt == TableFormat.csv else tables + [t]
+            payload["frf"] = {"input": inp, "response": out, "omega": omegas.tolist(),
+                              "magnitude": np.abs(H).tolist(), "phase": np.angle(H).tolist()}
+            if plot is not None:
+                modal.plot_frf(omegas, H, str(plot), f"{out}/{inp}")
+        elif plot is not None:
+            modal.plot_modes(result, str(plot))
+        if state_space or transfer:
+            A, B, C, D = result.system.state_space()
+            n = A.shape[0] // 2
+            states = result.system.names + [f"der({c})" for c in result.system.names]
+            if state_space:
+                tables += [rep.matrix_table("A", states, A), rep.matrix_table("B", result.coordinates, B, states),
+                           rep.matrix_table("C", states, C, result.coordinates),
+                           rep.matrix_table("D", result.coordinates, D)]
+                payload["state_space"] = {"states": states, "A": A.tolist(), "B": B.tolist(), "C": C.tolist(),
+                                          "D": D.tolist()}
+            if transfer:
+                num, den = modal.transfer_function(result, inp, out)
+                t = Table(f"transfer function {out}/{inp} (highest power first)", ["", "coefficients"])
+                t.add("numerator", ", ".join(f"{c:.10g}" for c in num))
+                t.add("denominator", ", ".join(f"{c:.10g}" for c in den))
+                tables.append(t)
+                payload["transfer_function"] = {"input": inp, "response": out, "numerator": list(num),
+                                                "denominator": list(den)}
+            del n
+        emit_tables(tables, fmt, output, payload)
+        return 0
+
+    run(body)
+
+
 @app.command()
 def schema(output: Optional[Path] = OutputOption) -> None:
     """Print the JSON Schema of the model language (for editor completion)."""

@@ -156,6 +156,8 @@ def vibration_modes(model: MechanicalModel, at: dict[str, float] | None = None) 
         j = int(np.argmin([abs(abs(v) - w) for v in pool]))
         v = pool.pop(j)
         zeta[k] = -v.real / abs(v) if abs(v) > 0 else 0.0
+        if abs(zeta[k]) < 1e-12:
+            zeta[k] = 0.0
     names = list(lin.coordinates)
     return Modes(names, e, freqs, shapes, rigid, zeta, vals, condensed, unstable, red)
 
@@ -169,3 +171,58 @@ def frf(model: MechanicalModel, modes: Modes, omegas: np.ndarray, inp: str, out:
             raise InputError(f"unknown coordinate {name!r} for --frf (choose from {', '.join(names)})")
     i, o = names.index(inp), names.index(out)
     return np.array([modes.system.receptance(w, lin)[o, i] for w in omegas])
+
+
+def transfer_function(modes: Modes, inp: str, out: str) -> tuple[np.ndarray, np.ndarray]:
+    """Numerator and denominator (highest power first) of the displacement response out/in to a force on in."""
+    from scipy import signal
+
+    names = modes.coordinates
+    for name in (inp, out):
+        if name not in names:
+            raise InputError(f"unknown coordinate {name!r} (choose from {', '.join(names)})")
+    A, B, C, D = modes.system.state_space()
+    i, o = names.index(inp), names.index(out)
+    num, den = signal.ss2tf(A, B[:, [i]], C[[o], :], D[[o]][:, [i]])
+    num = np.trim_zeros(np.where(np.abs(num[0]) < 1e-12 * max(1.0, np.max(np.abs(num))), 0.0, num[0]), "f")
+    return num, den
+
+
+def _figure():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def plot_modes(modes: Modes, path: str) -> None:
+    """Bar charts of the mass-normalised mode shapes, one panel per mode."""
+    plt = _figure()
+    k = max(1, len(modes.frequencies))
+    fig, axes = plt.subplots(1, k, figsize=(3 * k, 3.2), squeeze=False)
+    for j in range(len(modes.frequencies)):
+        ax = axes[0, j]
+        ax.bar(range(len(modes.coordinates)), modes.shapes[:, j], color=f"C{j % 10}")
+        ax.set_xticks(range(len(modes.coordinates)), modes.coordinates, rotation=45)
+        ax.set_title(f"mode {j + 1}: {modes.frequencies[j]:.4g} rad/s")
+        ax.axhline(0, color="k", lw=0.6)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+
+
+def plot_frf(omegas: np.ndarray, H: np.ndarray, path: str, label: str) -> None:
+    plt = _figure()
+    fig, (a1, a2) = plt.subplots(2, 1, figsize=(7, 5), sharex=True)
+    a1.semilogy(omegas, np.abs(H))
+    a1.set_ylabel(f"|H| {label}")
+    a1.grid(True, alpha=0.3)
+    a2.plot(omegas, np.angle(H))
+    a2.set_ylabel("phase [rad]")
+    a2.set_xlabel("omega [rad/s]")
+    a2.grid(True, alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)

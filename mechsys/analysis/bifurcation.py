@@ -1,0 +1,165 @@
+"""Equilibrium branches of a model as one parameter varies: continuation, stability and bifurcation points."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import sympy as sp
+
+from mechsys.analysis.continuation import Branch, sweep_parameter
+from mechsys.analysis.equilibria import EquilibriumProblem, parameter_values, solve_equilibria, wrap
+from mechsys.analysis.stability import ZERO_RE, eigen, reduced_pencil
+from mechsys.errors import InputError
+from mechsys.mechanics.model import MechanicalModel
+
+
+@dataclass
+class SweepResult:
+    parameter: str
+    names: list[str]  # unknowns reported: coordinates, then der(cyclic)
+    angles: list[bool]
+    branches: list[Branch]
+    bifurcations: list[dict] = field(default_factory=list)
+
+    def rows(self) -> list[list]:
+        """(branch, parameter value, coordinates..., stable) for every continuation point."""
+        out = []
+        for b, branch in enumerate(self.branches, start=1):
+            for pt in branch.points:
+                vals = [wrap(v) if a else float(v) for v, a in zip(pt.x[: len(self.names)], self.angles)]
+                out.append([b, float(pt.p), *vals, bool(pt.stable)])
+        return out
+
+
+def parameter_sensitivity(model: MechanicalModel, name: str):
+    """d(parameter vector)/d(name): derived parameters follow the swept one (exact, from their expressions)."""
+    doc = model.doc
+    if name not in doc.parameters:
+        raise InputError(f"--sweep {name}: unknown parameter{doc.suggest(name, list(doc.parameters))}")
+    base = doc.parameters[name]
+    full: dict[sp.Symbol, sp.Expr] = {}
+    for pname, expr in doc.parameter_exprs.items():
+        sym = doc.parameters[pname]
+        full[sym] = base if pname == name else expr.xreplace(full)
+    derivs = [sp.diff(full[s], base) for s in model.parameter_symbols]
+
+    def at(values: dict[str, float]) -> np.ndarray:
+        subs = {doc.parameters[k]: v for k, v in values.items()}
+        return np.array([float(sp.sympify(d).xreplace(subs).evalf()) for d in derivs])
+
+    return at
+
+
+def sweep(model: MechanicalModel, name: str, start: float, stop: float, points: int = 101,
+          search: dict | None = None) -> SweepResult:
+    """Follow every equilibrium branch found at the ends and the middle of [start, stop] by pseudo-arclength
+    continuation; stability from the eigenvalues; folds, branch points and Hopf points located on the way."""
+    problem = EquilibriumProblem(model)
+    sens = parameter_sensitivity(model, name)
+    lo, hi = min(start, stop), max(start, stop)
+
+    def pvec(p: float) -> np.ndarray:
+        return parameter_values(model, {name: p})
+
+    def F(z, p):
+        return problem.F(z, pvec(p))
+
+    def Fx(z, p):
+        return problem.J(z, pvec(p))
+
+    def Fp(z, p):
+        values = dict(zip([s.name for s in model.parameter_symbols], pvec(p)))
+        return problem.Fp(z, pvec(p)) @ sens(values)
+
+    def eig(z, p):
+        problem.current_parameters = pvec(p)
+        A, B, _ = reduced_pencil(problem, problem.equilibrium(z))
+        return eigen(A, B)[0]
+
+    starts = []
+    for p in np.linspace(lo, hi, 5):  # branches born inside the range need a start of their own
+        for z in solve_equilibria(problem, pvec(p), search):
+            starts.append((z, float(p)))
+    span = hi - lo if hi > lo else 1.0
+    step = span / max(points - 1, 1)
+    branches = sweep_parameter(F, Fx, Fp, starts, lo, hi, eig, ds=step / 2, ds_max=min(step, 0.2 * max(span, 1.0)),
+                               tol_re=ZERO_RE * 10) if starts else []
+    nreport = len(problem.free) + len(problem.rate_unknowns)
+    names = list(problem.free) + [f"der({c})" for c in problem.rate_unknowns]
+    angles = [problem.angles.get(c, False) for c in problem.free] + [False] * len(problem.rate_unknowns)
+    result = SweepResult(name, names, angles, branches)
+    events = []
+    for branch in branches:
+        for bif in branch.bifurcations:
+            coords = {n: (wrap(v) if a else float(v)) for n, v, a in zip(names, bif.x[:nreport], angles)}
+            events.append({"kind": bif.kind, "parameter": name, "value": float(bif.p), "coordinates": coords})
+    result.bifurcations = _merge_events(events, angles, step)
+    result.bifurcations.sort(key=lambda b: (b["value"], b["kind"]))
+    return result
+
+
+def _merge_events(events: list[dict], angles: list[bool], step: float) -> list[dict]:
+    """One entry per bifurcation point. A nontrivial branch folding back exactly where another branch has a
+    branch point is a pitchfork; it is reported at the fold, whose location is the well-conditioned one."""
+
+    def close(a: dict, b: dict) -> bool:
+        if abs(a["value"] - b["value"]) > max(1e-6, step):
+            return False
+        for (x, y), is_angle in zip(zip(a["coordinates"].values(), b["coordinates"].values()), angles):
+            d = wrap(x - y) if is_angle else x - y
+            if abs(d) > 1e-3 * (1 + abs(x)):
+                return False
+        return True
+
+    clusters: list[list[dict]] = []
+    for ev in events:
+        for cluster in clusters:
+            if any(close(ev, other) for other in cluster) and (ev["kind"] == "hopf") == (cluster[0]["kind"] == "hopf"):
+                cluster.append(ev)
+                break
+        else:
+            clusters.append([ev])
+    merged = []
+    for cluster in clusters:
+        kinds = {ev["kind"] for ev in cluster}
+        folds = [ev for ev in cluster if ev["kind"] == "fold"]
+        if "fold" in kinds and "branch_point" in kinds:
+            merged.append({**folds[0], "kind": "pitchfork"})
+        else:
+            merged.append((folds or cluster)[0])
+    return merged
+
+
+def plot_sweep(result: SweepResult, path: str, coordinate: str | None = None) -> None:
+    """Bifurcation diagram: stable branches solid, unstable dashed, bifurcation points marked."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    if not result.names:
+        raise InputError("nothing to plot: the system has no free coordinates")
+    k = result.names.index(coordinate) if coordinate in result.names else 0
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    for b, branch in enumerate(result.branches):
+        ps = np.array([pt.p for pt in branch.points])
+        ys = np.array([pt.x[k] for pt in branch.points], dtype=float)
+        if result.angles[k]:
+            ys = np.array([wrap(y) for y in ys])
+        stable = np.array([pt.stable for pt in branch.points])
+        for i in range(len(ps) - 1):
+            if result.angles[k] and abs(ys[i + 1] - ys[i]) > np.pi:
+                continue
+            style = "-" if stable[i] and stable[i + 1] else "--"
+            ax.plot(ps[i:i + 2], ys[i:i + 2], style, color=f"C{b % 10}", lw=1.8)
+    for bif in result.bifurcations:
+        y = list(bif["coordinates"].values())[k] if bif["coordinates"] else 0.0
+        ax.plot([bif["value"]], [y], "o", color="k", ms=5)
+        ax.annotate(bif["kind"], (bif["value"], y), textcoords="offset points", xytext=(4, 4), fontsize=8)
+    ax.set_xlabel(result.parameter)
+    ax.set_ylabel(result.names[k])
+    ax.set_title("equilibrium branches (solid: stable, dashed: unstable)")
+    ax.grid(True, alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)

@@ -1,0 +1,119 @@
+"""Tables for equilibria, stability, linearization, sweeps and vibration modes."""
+from __future__ import annotations
+
+import numpy as np
+
+from mechsys.analysis.equilibria import EquilibriaResult
+from mechsys.analysis.linearize import Linearization
+from mechsys.report.tables import Table, fmt_number
+
+
+def mode_rows(eigenvalues: np.ndarray) -> list[tuple[complex, float, float]]:
+    """(eigenvalue, natural frequency |lambda|, damping ratio -Re/|lambda|) for each root with Im >= 0."""
+    out = []
+    for v in eigenvalues:
+        if v.imag < -1e-12 * max(1.0, abs(v)):
+            continue
+        w = abs(v)
+        out.append((complex(v), float(w), float(-v.real / w) if w > 0 else 0.0))
+    return out
+
+
+def equilibria_tables(result: EquilibriaResult) -> list[Table]:
+    t = Table("equilibria", ["#", "coordinates", "steady rates", "stability", "eigenvalues"])
+    for k, e in enumerate(result.equilibria, start=1):
+        coords = ", ".join(f"{c} = {fmt_number(v)}" for c, v in e.coordinates.items()) or "-"
+        rates = ", ".join(f"der({c}) = {fmt_number(v)}" for c, v in e.rates.items()) or "-"
+        eigs = "; ".join(fmt_number(complex(v)) for v in e.eigenvalues)
+        t.add(k, coords, rates, e.stability + (" (critical)" if e.critical else ""), eigs)
+    if result.message:
+        t.notes.append(result.message)
+    if result.fixed_rates:
+        t.notes.append("steady motions form a family; rates fixed at the initial rate: "
+                       + ", ".join(f"der({c}) = {fmt_number(v)}" for c, v in result.fixed_rates.items()))
+    modes = Table("modes of the linearized motion", ["#", "eigenvalue", "natural frequency [rad/s]",
+                                                     "frequency [Hz]", "damping ratio"])
+    reasons = Table("verdicts", ["#", "reason"])
+    for k, e in enumerate(result.equilibria, start=1):
+        for v, w, z in mode_rows(e.eigenvalues):
+            if abs(v.imag) <= 1e-12 * max(1.0, abs(v)):
+                modes.add(k, v, "-", "-", "non-oscillatory (real root)")
+            else:
+                modes.add(k, v, w, w / (2 * np.pi), z)
+        reasons.add(k, e.reason)
+    return [t, modes, reasons]
+
+
+def equilibria_payload(result: EquilibriaResult, bifurcations: list | None = None) -> dict:
+    return {"equilibria": [e.to_dict() for e in result.equilibria], "bifurcations": bifurcations or [],
+            "message": result.message, "cyclic": result.cyclic}
+
+
+def matrix_table(title: str, names: list[str], matrix: np.ndarray, row_names: list[str] | None = None) -> Table:
+    t = Table(title, [""] + names)
+    for name, row in zip(row_names or names, np.atleast_2d(matrix)):
+        t.add(name, *[float(x) for x in row])
+    return t
+
+
+def linearization_tables(lin: Linearization, label: str, hurwitz: bool) -> list[Table]:
+    names = lin.coordinates
+    tables = [matrix_table(f"{label}: {key}", names, getattr(lin, key)) for key in ("M", "C", "G", "K", "N")]
+    if np.linalg.cond(lin.M) < 1e12:
+        states = names + [f"der({c})" for c in names]
+        tables.append(matrix_table(f"{label}: A (state {', '.join(states)})", states, lin.A))
+        tables.append(matrix_table(f"{label}: B (generalized forces)", names, lin.B, states))
+    if hurwitz:
+        tables += hurwitz_tables(lin, label)
+    return tables
+
+
+def hurwitz_tables(lin: Linearization, label: str) -> list[Table]:
+    coeffs = lin.characteristic_polynomial()
+    n = len(coeffs) - 1
+    poly = Table(f"{label}: characteristic polynomial det(M s^2 + (C+G) s + K + N)", ["power of s", "coefficient"])
+    for k, c in enumerate(coeffs):
+        poly.add(n - k, float(c))
+    dets = lin.hurwitz_determinants()
+    hur = Table(f"{label}: Routh-Hurwitz conditions (all > 0 <=> asymptotically stable)", ["condition", "value", "holds"])
+    hur.add("all coefficients > 0", min(float(c) for c in coeffs), bool(all(c > 0 for c in coeffs)))
+    for k, d in enumerate(dets, start=1):
+        hur.add(f"Delta_{k} > 0", d, bool(d > 0))
+    return [poly, hur]
+
+
+def symbolic_tables(mats: dict, names: list[str]) -> list[Table]:
+    from mechsys.report.printing import to_text
+
+    tables = []
+    for key, mat in mats.items():
+        t = Table(f"{key} (about any state of rest; expressions of the coordinates)", [""] + names)
+        for i, name in enumerate(names):
+            t.add(name, *[to_text(mat[i, j]) for j in range(mat.shape[1])])
+        tables.append(t)
+    return tables
+
+
+def sweep_tables(result) -> list[Table]:
+    t = Table(f"branches over {result.parameter}", ["branch", result.parameter, *result.names, "stable"])
+    for row in result.rows():
+        t.add(*row)
+    b = Table("bifurcations", ["kind", "parameter", "value", "coordinates"])
+    for bif in result.bifurcations:
+        b.add(bif["kind"], bif["parameter"], bif["value"],
+              ", ".join(f"{k} = {fmt_number(v)}" for k, v in bif["coordinates"].items()))
+    return [b, t]
+
+
+def modes_tables(modes) -> list[Table]:
+    t = Table(f"natural frequencies about {', '.join(f'{c} = {fmt_number(v)}' for c, v in modes.equilibrium.coordinates.items()) or 'the equilibrium'}",
+              ["mode", "frequency [rad/s]", "frequency [Hz]", "damping ratio", "rigid body"])
+    for k, (w, z, r) in enumerate(zip(modes.frequencies, modes.damping_ratios, modes.rigid_body), start=1):
+        t.add(k, float(w), float(w / (2 * np.pi)), float(z), "yes" if r else "")
+    s = Table("mass-normalised mode shapes (columns)", ["coordinate"] + [f"mode {k}" for k in
+                                                                         range(1, len(modes.frequencies) + 1)])
+    for i, c in enumerate(modes.coordinates):
+        s.add(c + (" (condensed)" if c in modes.condensed else ""), *[float(x) for x in modes.shapes[i]])
+    if modes.unstable_modes:
+        t.notes.append(f"{modes.unstable_modes} mode(s) with negative stiffness: the equilibrium is statically unstable")
+    return [t, s]
