@@ -14,10 +14,11 @@ $(STAMP): pyproject.toml
 
 install: $(STAMP)
 
-## demo: install, then derive and describe the bundled centrifuge (Krodkiewski ch. 5)
+## demo: install, then derive, describe and analyse the bundled centrifuge (Krodkiewski ch. 5)
 demo: $(STAMP)
 	$(BIN)/mechsys info systems/centrifuge.yaml
 	$(BIN)/mechsys derive systems/centrifuge.yaml --check
+	$(BIN)/mechsys equilibria systems/centrifuge.yaml
 
 ## test: install, then run the whole suite (slow tests included, as in CI)
 test: $(STAMP)
