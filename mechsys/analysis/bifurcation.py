@@ -100,7 +100,7 @@ def sweep(model: MechanicalModel, name: str, start: float, stop: float, points: 
 
 def _merge_events(events: list[dict], angles: list[bool], step: float) -> list[dict]:
     """One entry per bifurcation point. A nontrivial branch folding back exactly where another branch has a
-    branch point is a pitchfork; it is reported at the fold, whose location is the well-conditioned one."""
+    branch point (a pitchfork) is one branch point, not a fold."""
 
     def close(a: dict, b: dict) -> bool:
         if abs(a["value"] - b["value"]) > max(1e-6, step):
@@ -124,7 +124,10 @@ def _merge_events(events: list[dict], angles: list[bool], step: float) -> list[d
         kinds = {ev["kind"] for ev in cluster}
         folds = [ev for ev in cluster if ev["kind"] == "fold"]
         if "fold" in kinds and "branch_point" in kinds:
-            merged.append({**folds[0], "kind": "pitchfork"})
+            # a pitchfork: the other branch folds back exactly here; the fold's parameter value is the
+            # well-conditioned one, the branch point's coordinates are the exact ones
+            bp = next(ev for ev in cluster if ev["kind"] == "branch_point")
+            merged.append({**bp, "value": folds[0]["value"]})
         else:
             merged.append((folds or cluster)[0])
     return merged

@@ -242,7 +242,7 @@ def _newton(problem: EquilibriumProblem, z: np.ndarray, p: np.ndarray, roots: li
         z = z + scale * step
         if np.linalg.norm(scale * step, np.inf) < 1e-12 * (1 + np.linalg.norm(z, np.inf)):
             break
-    return _polish(problem, z, p)
+    return _polish(problem, problem.normalize(z), p)
 
 
 def _polish(problem: EquilibriumProblem, z: np.ndarray, p: np.ndarray) -> np.ndarray | None:
@@ -258,8 +258,8 @@ def _polish(problem: EquilibriumProblem, z: np.ndarray, p: np.ndarray) -> np.nda
             break
     F = problem.F(z, p)
     J = problem.J(z, p)
-    scale = max(1.0, float(np.max(np.abs(J))) * max(1.0, float(np.max(np.abs(z)))))
-    if not np.all(np.isfinite(F)) or np.max(np.abs(F)) > 1e-9 * scale:
+    scale = max(1.0, float(np.max(np.abs(J))))
+    if not np.all(np.isfinite(F)) or np.max(np.abs(F)) > 1e-10 * scale:
         return None
     return z
 

@@ -73,16 +73,39 @@ def assess(problem, e, p: np.ndarray) -> None:
     e.eigenvalues, e.jacobian = vals, J
     scale = max(1.0, float(np.max(np.abs(vals)))) if len(vals) else 1.0
     tol = ZERO_RE * scale
+    e.critical = bool(len(vals) and np.min(np.abs(vals.real)) <= tol)
     if len(vals) and np.max(vals.real) > tol:
         e.stability, e.reason = "unstable", "an eigenvalue has a positive real part"
-        e.critical = False
         return
     if len(vals) == 0 or np.max(vals.real) < -tol:
         e.stability, e.reason = "asymptotically stable", "all eigenvalues have negative real parts"
         return
-    e.critical = True
     zero = int(np.sum(np.abs(vals.real) <= tol))
     e.stability, e.reason = energy_verdict(problem, e, p, zero)
+    if e.stability == "undecided":
+        e.stability, e.reason = _conservative_linear(problem, e, p, vals, tol, e.stability, e.reason)
+
+
+def _conservative_linear(problem, e, p, vals, tol, stability, reason) -> tuple[str, str]:
+    """Conservative systems (no non-conservative forces at all) whose linearization is purely oscillatory with
+    simple frequencies are gyroscopically stabilized: reported stable, with the basis stated (linear stability;
+    e.g. the free rigid body spinning about its minor axis, where the energy test alone is inconclusive)."""
+    model = problem.model
+    Q = model.generalized_forces
+    if Q != sp.zeros(*Q.shape):
+        args = list(model.q) + list(model.u) + list(model.parameter_symbols)
+        fn = compile_exprs(list(Q.xreplace({model.t: 0})), args)
+        rng = np.random.default_rng(9)
+        n = len(model.q)
+        if any(np.max(np.abs(fn(*rng.uniform(-2, 2, 2 * n), *p))) > 1e-12 for _ in range(3)):
+            return stability, reason
+    if np.max(np.abs(vals.real)) > tol:
+        return stability, reason
+    osc = sorted(abs(v.imag) for v in vals if abs(v.imag) > tol)
+    if any(abs(a - b) <= 1e-7 * max(1.0, a) for a, b in zip(osc[::2][1:], osc[::2][:-1])):
+        return stability, reason  # repeated frequencies: possible resonance, secular growth
+    return "stable", reason.split(";")[0] + "; conservative system with a purely oscillatory, simple spectrum " \
+                                           "(gyroscopic stabilization): stable in the linear sense"
 
 
 # ----------------------------------------------------------------------------------------- energy argument

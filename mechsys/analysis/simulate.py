@@ -1,0 +1,218 @@
+"""Forward dynamics: compiled equations, scipy integrators (auto stiffness choice), constraint projection, energies."""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.integrate import solve_ivp
+
+from mechsys.analysis.equilibria import parameter_values
+from mechsys.errors import AnalysisError
+from mechsys.mechanics.model import MechanicalModel
+from mechsys.numeric.kane import compile_equations
+from mechsys.numeric.lambdify import compile_matrix
+
+METHODS = ("auto", "RK45", "DOP853", "Radau", "BDF", "LSODA")
+
+
+@dataclass
+class Compiled:
+    """Numeric callables a simulation needs, compiled once per model."""
+
+    eqs: object
+    A: object
+    b: object
+    phi: object
+    T: object
+    V: object
+    n: int
+    m: int
+    seconds: float
+
+
+def compile_model(model: MechanicalModel) -> Compiled:
+    cached = getattr(model, "_simulation_compiled", None)
+    if cached is not None:
+        return cached
+    t0 = time.perf_counter()
+    params = model.parameter_symbols
+    args = (model.t, model.q, model.u, params)
+    eqs = compile_equations(model)
+    A = compile_matrix(model.constraint_jacobian, *args)
+    b = compile_matrix(model.constraint_rhs, *args)
+    phi = compile_matrix(model.holonomic_constraints if model.holonomic_constraints.shape[0] else
+                         model.constraint_jacobian[:0, :1], *args)
+    import sympy as sp
+
+    T = compile_matrix(sp.Matrix([model.kinetic_energy]), *args)
+    V = compile_matrix(sp.Matrix([model.potential_energy]), *args)
+    out = Compiled(eqs, A, b, phi, T, V, len(model.q), model.constraint_jacobian.shape[0],
+                   time.perf_counter() - t0)
+    model._simulation_compiled = out
+    return out
+
+
+@dataclass
+class SimulationResult:
+    coordinates: list[str]
+    t: np.ndarray
+    q: np.ndarray  # (len(t), n)
+    u: np.ndarray
+    T: np.ndarray
+    V: np.ndarray
+    residual: np.ndarray  # max |constraint| at each output time (0 without constraints)
+    method: str
+    rhs_evaluations: int
+    steps: int
+    timings: dict = field(default_factory=dict)
+    warnings: list[str] = field(default_factory=list)
+
+    @property
+    def E(self) -> np.ndarray:
+        return self.T + self.V
+
+    @property
+    def energy_drift(self) -> float:
+        """max |E(t) - E(0)| / max(|E(0)|, max T): meaningful for conservative systems."""
+        scale = max(abs(self.E[0]), float(np.max(np.abs(self.T))), 1e-300)
+        return float(np.max(np.abs(self.E - self.E[0])) / scale)
+
+    def columns(self) -> tuple[list[str], np.ndarray]:
+        names = ["t", *self.coordinates, *[f"der({c})" for c in self.coordinates], "T", "V", "E", "residual"]
+        data = np.column_stack([self.t, self.q, self.u, self.T, self.V, self.E, self.residual])
+        return names, data
+
+
+class RightHandSide:
+    """y' = g(t, y) for y = (q, u); with constraints the accelerations solve [[M, A^T], [A, 0]] [q''; -lambda] = [f; b]."""
+
+    def __init__(self, c: Compiled, p: np.ndarray) -> None:
+        self.c = c
+        self.p = p
+        self.calls = 0
+
+    def accelerations(self, t: float, q: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        M, f = self.c.eqs.evaluate(t, q, u, self.p)
+        if self.c.m == 0:
+            return np.linalg.solve(M, f), np.zeros(0)
+        A = self.c.A(t, q, u, self.p)
+        b = self.c.b(t, q, u, self.p).ravel()
+        n, m = self.c.n, self.c.m
+        K = np.block([[M, A.T], [A, np.zeros((m, m))]])
+        sol = np.linalg.lstsq(K, np.concatenate([f, b]), rcond=None)[0] if np.linalg.cond(K) > 1e14 else \
+            np.linalg.solve(K, np.concatenate([f, b]))
+        return sol[:n], -sol[n:]
+
+    def __call__(self, t: float, y: np.ndarray) -> np.ndarray:
+        self.calls += 1
+        n = self.c.n
+        q, u = y[:n], y[n:]
+        a, _ = self.accelerations(t, q, u)
+        return np.concatenate([u, a])
+
+
+def project(c: Compiled, p: np.ndarray, t: float, q: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Closest consistent state: Gauss-Newton on Phi(q, t) = 0 (minimum-norm steps), then A u = -(A u)_t part."""
+    if c.m == 0:
+        return q, u
+    q = q.copy()
+    for _ in range(20):
+        phi = c.phi(t, q, u, p).ravel()
+        if phi.size == 0 or np.max(np.abs(phi)) < 1e-14 * (1 + np.max(np.abs(q))):
+            break
+        A = c.A(t, q, u, p)
+        hol = A[: phi.size]
+        q = q - np.linalg.lstsq(hol, phi, rcond=None)[0]
+    A = c.A(t, q, u, p)
+    # velocity constraints are A u + a_t = 0; a_t from one evaluation at u = 0 is not compiled separately,
+    # so project onto the null space of A around the current velocity (scleronomic constraints)
+    r = A @ u
+    u = u - np.linalg.lstsq(A, r, rcond=None)[0]
+    return q, u
+
+
+def stiffness(rhs: RightHandSide, t0: float, y0: np.ndarray, t_end: float) -> tuple[float, float]:
+    """(spectral radius of the RHS Jacobian, stiffness ratio) at the start, by finite differences; a heuristic
+    for choosing an implicit method, never used for results."""
+    n = len(y0)
+    f0 = rhs(t0, y0)
+    J = np.zeros((n, n))
+    for k in range(n):
+        h = 1e-7 * max(1.0, abs(y0[k]))
+        y = y0.copy()
+        y[k] += h
+        J[:, k] = (rhs(t0, y) - f0) / h
+    ev = np.linalg.eigvals(J)
+    radius = float(np.max(np.abs(ev))) if ev.size else 0.0
+    return radius, radius * (t_end - t0)
+
+
+def choose_method(rhs: RightHandSide, t0: float, y0: np.ndarray, t_end: float) -> tuple[str, str]:
+    radius, steps_needed = stiffness(rhs, t0, y0, t_end)
+    if steps_needed > 5e4:
+        return "Radau", f"stiff: spectral radius {radius:.3g} over {t_end - t0:g} s"
+    return "DOP853", f"non-stiff: spectral radius {radius:.3g}"
+
+
+def simulate(model: MechanicalModel, t_end: float, dt: float | None = None, method: str = "auto",
+             rtol: float = 1e-10, atol: float = 1e-12, overrides_p: np.ndarray | None = None) -> SimulationResult:
+    """Integrate from the file's initial state to t_end; outputs every dt (default t_end/1000)."""
+    if method not in METHODS:
+        raise AnalysisError(f"unknown method {method!r}; use one of {', '.join(METHODS)}")
+    if t_end <= 0:
+        raise AnalysisError("--t-end must be positive")
+    timings = {}
+    t0 = time.perf_counter()
+    c = compile_model(model)
+    timings["compile"] = time.perf_counter() - t0
+    p = parameter_values(model) if overrides_p is None else overrides_p
+    q0 = np.array([model.doc.initial[n] for n in model.coordinates], dtype=float)
+    u0 = np.array([model.doc.initial_rate[n] for n in model.coordinates], dtype=float)
+    q0, u0 = project(c, p, 0.0, q0, u0)
+    rhs = RightHandSide(c, p)
+    warnings = []
+    M0, _ = c.eqs.evaluate(0.0, q0, u0, p)
+    cond = np.linalg.cond(M0) if M0.size else 1.0
+    if cond > 1e8:
+        warnings.append(f"the mass matrix is badly conditioned (cond = {cond:.2e}): results may lose accuracy")
+    chosen = method
+    if method == "auto":
+        chosen, why = choose_method(rhs, 0.0, np.concatenate([q0, u0]), t_end)
+        warnings.append(f"auto method: {chosen} ({why})")
+    dt = dt or t_end / 1000
+    grid = np.arange(0.0, t_end + 0.5 * dt, dt)
+    grid[-1] = min(grid[-1], t_end)
+    t1 = time.perf_counter()
+    n = c.n
+    ys = [np.concatenate([q0, u0])]
+    steps = 0
+    if c.m:
+        # closed loops: integrate output interval by output interval and project onto the constraints
+        y = ys[0]
+        for a, b in zip(grid[:-1], grid[1:]):
+            sol = solve_ivp(rhs, (a, b), y, method=chosen, rtol=rtol, atol=atol)
+            if not sol.success:
+                raise AnalysisError(f"integration failed at t = {sol.t[-1]:.6g}: {sol.message}")
+            steps += len(sol.t) - 1
+            q, u = project(c, p, b, sol.y[:n, -1], sol.y[n:, -1])
+            y = np.concatenate([q, u])
+            ys.append(y)
+        Y = np.array(ys)
+    else:
+        sol = solve_ivp(rhs, (0.0, float(grid[-1])), ys[0], method=chosen, t_eval=grid, rtol=rtol, atol=atol,
+                        dense_output=False)
+        if not sol.success:
+            raise AnalysisError(f"integration failed at t = {sol.t[-1]:.6g}: {sol.message}")
+        steps = int(getattr(sol, "nfev", 0) and len(sol.t))
+        Y = sol.y.T
+    timings["integrate"] = time.perf_counter() - t1
+    q, u = Y[:, :n], Y[:, n:]
+    T = np.array([c.T(t, qi, ui, p)[0, 0] for t, qi, ui in zip(grid, q, u)])
+    V = np.array([c.V(t, qi, ui, p)[0, 0] for t, qi, ui in zip(grid, q, u)])
+    if c.m and c.phi(0.0, q[0], u[0], p).size:
+        res = np.array([np.max(np.abs(c.phi(t, qi, ui, p))) for t, qi, ui in zip(grid, q, u)])
+    else:
+        res = np.zeros(len(grid))
+    return SimulationResult(list(model.coordinates), grid, q, u, T, V, res, chosen, rhs.calls, steps, timings,
+                            warnings)

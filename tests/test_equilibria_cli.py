@@ -1,0 +1,170 @@
+"""CLI smoke tests for `mechsys equilibria` and `mechsys modes`: JSON contract, --sweep CSV/plot output, FRF CSV,
+exit codes (2 for bad input such as a malformed --sweep, 1 when the analysis cannot be done, e.g. equilibria of a
+non-autonomous system). Reference numbers: seed000_part2_digest.md §2.1 (Problem 57), §2.2 (centrifuge);
+seeds001_004_digest.md E001-8 (beads on a string)."""
+from __future__ import annotations
+
+import csv
+import json
+import math
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from mechsys.cli import app
+
+ROOT = Path(__file__).resolve().parents[1]
+SYSTEMS = ROOT / "systems"
+DATA = ROOT / "tests" / "data"
+runner = CliRunner()
+
+
+def invoke(*args):
+    return runner.invoke(app, [str(a) for a in args])
+
+
+def ok_json(*args):
+    result = invoke(*args)
+    assert result.exit_code == 0, result.output
+    return json.loads(result.stdout)
+
+
+def test_equilibria_json_contract_problem57():
+    """§2.1: three equilibria q = -pi, 0, pi; eigenvalues as [re, im] pairs; verdicts as strings."""
+    data = ok_json("equilibria", SYSTEMS / "problem57.yaml", "-f", "json")
+    assert {"equilibria", "bifurcations"} <= set(data)
+    assert data["bifurcations"] == []
+    eqs = data["equilibria"]
+    assert len(eqs) == 3
+    for e in eqs:
+        assert {"coordinates", "rates", "eigenvalues", "stability"} <= set(e)
+        assert set(e["coordinates"]) == {"q"} and e["rates"] == {}
+        assert e["stability"] in {"asymptotically stable", "stable", "unstable", "undecided"}
+        assert all(isinstance(p, list) and len(p) == 2 and all(isinstance(x, (int, float)) for x in p)
+                   for p in e["eigenvalues"])
+    assert [e["coordinates"]["q"] for e in eqs] == pytest.approx([-math.pi, 0.0, math.pi], abs=1e-9)
+    assert [e["stability"] for e in eqs] == ["asymptotically stable", "unstable", "asymptotically stable"]
+    saddle = sorted(re for re, im in eqs[1]["eigenvalues"])
+    assert saddle == pytest.approx([-1 - math.sqrt(1 + math.pi**2), -1 + math.sqrt(1 + math.pi**2)], rel=1e-9)
+    focus = sorted((re, im) for re, im in eqs[2]["eigenvalues"])
+    root = math.sqrt(2 * math.pi**2 - 1)
+    assert focus[0] == pytest.approx((-1.0, -root), rel=1e-9)
+    assert focus[1] == pytest.approx((-1.0, root), rel=1e-9)
+
+
+def test_equilibria_json_reports_steady_rates_of_cyclic_coordinates():
+    """§2.2: the centrifuge's steady motions carry the cyclic rate alpha' = Mo/dM = 7 and only beta as coordinate."""
+    data = ok_json("equilibria", SYSTEMS / "centrifuge.yaml", "-f", "json")
+    eqs = data["equilibria"]
+    assert [e["coordinates"]["beta"] for e in eqs] == pytest.approx([-2.879372, -1.249420, -0.423246, 1.410445],
+                                                                    abs=1e-5)
+    for e in eqs:
+        assert e["rates"]["alpha"] == pytest.approx(7.0, rel=1e-9)
+        assert len(e["eigenvalues"]) == 3
+
+
+def test_set_is_applied_before_the_analysis():
+    """--set Mo=35 (dM = Mo/7 follows) keeps omega_s = 7: the same four beta_s."""
+    data = ok_json("equilibria", SYSTEMS / "centrifuge.yaml", "--set", "Mo=35", "-f", "json")
+    assert len(data["equilibria"]) == 4
+    data = ok_json("equilibria", SYSTEMS / "centrifuge.yaml", "--set", "dM=10", "-f", "json")
+    # omega_s = 50/10 = 5 < omega_c = 5.127846: only two steady motions (§2.2 table, fold at 5.127846)
+    assert len(data["equilibria"]) == 2
+    assert [e["rates"]["alpha"] for e in data["equilibria"]] == pytest.approx([5.0, 5.0], rel=1e-9)
+
+
+def test_sweep_writes_csv_and_plot(tmp_path):
+    """--sweep with -f csv --output writes the branch table; --plot writes a bifurcation diagram."""
+    out = tmp_path / "branches.csv"
+    png = tmp_path / "diagram.png"
+    result = invoke("equilibria", SYSTEMS / "indicator.yaml", "--set", "Iz=0.8", "--sweep", "omega1=-20:20:21",
+                    "-f", "csv", "--output", out, "--plot", png)
+    assert result.exit_code == 0, result.output
+    assert out.is_file() and out.stat().st_size > 0
+    rows = list(csv.reader(out.read_text().splitlines()))
+    assert len(rows) >= 1 + 21, rows[:3]   # header + at least one row per sweep value
+    assert any("omega1" in cell for cell in rows[0]), rows[0]
+    assert png.is_file() and png.stat().st_size > 0
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_sweep_json_lists_bifurcations():
+    """Iz = 0.8, Omega = 150: pitchforks at omega1 = -2.5 and 10 (digest §2.4 table), both at beta = pi."""
+    data = ok_json("equilibria", SYSTEMS / "indicator.yaml", "--set", "Iz=0.8", "--sweep", "omega1=-20:20:21",
+                   "-f", "json")
+    bifs = data["bifurcations"]
+    assert bifs, data
+    for b in bifs:
+        assert {"kind", "parameter", "value", "coordinates"} <= set(b)
+        assert b["kind"] in {"fold", "branch_point", "hopf"}
+        assert b["parameter"] == "omega1"
+    assert sorted({round(b["value"], 6) for b in bifs}) == pytest.approx([-2.5, 10.0], abs=1e-6)
+
+
+@pytest.mark.parametrize("spec", ["Mo=20:60", "Mo20:60:5", "Mo=a:60:5", "Mo=20:60:1", "Mo=20:60:5:7", "=1:2:3",
+                                  "Mo=20:60:2.5"])
+def test_bad_sweep_syntax_exits_2(spec):
+    result = invoke("equilibria", SYSTEMS / "centrifuge.yaml", "--sweep", spec)
+    assert result.exit_code == 2, result.output
+    assert "--sweep" in result.output
+
+
+def test_sweep_of_unknown_parameter_exits_2():
+    result = invoke("equilibria", SYSTEMS / "centrifuge.yaml", "--sweep", "nosuch=1:2:3")
+    assert result.exit_code == 2, result.output
+    assert "nosuch" in result.output
+
+
+def test_equilibria_of_a_non_autonomous_system_exits_1(tmp_path):
+    """Equilibria need an autonomous system (part-2 digest §1.1, §1.3: f must not depend explicitly on t)."""
+    model = tmp_path / "forced.yaml"
+    model.write_text(
+        "name: forced\n"
+        "parameters: {k: 4, c: 0.5, F0: 1}\n"
+        "coordinates:\n  x: {initial: 0, rate: 0}\n"
+        "links:\n  mass:\n    joint: {type: prismatic, parent: ground, axis: x, coordinate: x}\n    mass: 1\n"
+        "forces:\n"
+        "  - {type: potential, value: k*x^2/2}\n"
+        "  - {type: generalized_force, coordinate: x, value: -c*der(x) + F0*sin(t)}\n")
+    result = invoke("equilibria", model)
+    assert result.exit_code == 1, result.output
+    text = result.output.lower()
+    assert "autonomous" in text, result.output
+    assert "traceback" not in text
+
+
+def test_modes_json_beads():
+    """E001-8: w^2 = (4T/(m l)){2 - sqrt2, 2, 2 + sqrt2}, 4T/(m l) = 4000."""
+    data = ok_json("modes", DATA / "beads_string.yaml", "-f", "json")
+    assert data["coordinates"] == ["y1", "y2", "y3"]
+    if "frequencies" in data:
+        freqs = data["frequencies"]
+    else:
+        freqs = [m["frequency_rad_s"] for m in data["modes"]]
+    s2 = math.sqrt(2)
+    assert [w * w for w in freqs] == pytest.approx([4000 * (2 - s2), 8000.0, 4000 * (2 + s2)], rel=1e-9)
+
+
+def test_modes_frf_csv(tmp_path):
+    """--frf START:STOP:N with -f csv --output writes the receptance table (one row per frequency)."""
+    out = tmp_path / "frf.csv"
+    result = invoke("modes", DATA / "beads_string.yaml", "--frf", "1:200:40", "--input", "y1", "--response", "y3",
+                    "-f", "csv", "--output", out)
+    assert result.exit_code == 0, result.output
+    assert out.is_file() and out.stat().st_size > 0
+    rows = [r for r in csv.reader(out.read_text().splitlines()) if r]
+    assert len(rows) == 41, rows[:3]
+    first = [float(x) for x in rows[1][:2]]
+    assert first[0] == pytest.approx(1.0)
+    # receptance |(K - w^2 M)^-1|[y3, y1] at w = 1 (undamped), K = 400 tridiag(-1, 2, -1), M = 0.1 I
+    import numpy as np
+
+    K = 400.0 * np.array([[2, -1, 0], [-1, 2, -1], [0, -1, 2]])
+    assert first[1] == pytest.approx(abs(np.linalg.inv(K - 0.1 * np.eye(3))[2, 0]), rel=1e-9)
+
+
+@pytest.mark.parametrize("spec", ["1:200", "a:2:3", "1:2:1"])
+def test_bad_frf_syntax_exits_2(spec):
+    result = invoke("modes", DATA / "beads_string.yaml", "--frf", spec)
+    assert result.exit_code == 2, result.output
