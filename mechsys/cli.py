@@ -54,6 +54,9 @@ def write_atomic(path: Path, text: str) -> None:
     try:
         with os.fdopen(fd, "w", encoding="utf-8") as fh:
             fh.write(text)
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)
         os.replace(tmp, path)
     except BaseException:
         if os.path.exists(tmp):
@@ -356,6 +359,121 @@ def modes(
                                                 "denominator": list(den)}
             del n
         emit_tables(tables, fmt, output, payload)
+        return 0
+
+    run(body)
+
+
+@app.command()
+def simulate(
+    file: Path = typer.Argument(..., help="Model file (YAML)."),
+    t_end: float = typer.Option(10.0, "--t-end", help="End time [s]."),
+    dt: Optional[float] = typer.Option(None, "--dt", help="Output interval [s] (default t_end/1000)."),
+    method: str = typer.Option("auto", "--method", "-m",
+                               help="auto (stiffness check), RK45, DOP853, Radau, BDF or LSODA."),
+    rtol: float = typer.Option(1e-10, "--rtol", help="Relative tolerance."),
+    atol: float = typer.Option(1e-12, "--atol", help="Absolute tolerance."),
+    output: Optional[Path] = typer.Option(None, "--output", "-o", help="Result file: .csv or .json (atomic)."),
+    plot: Optional[Path] = typer.Option(None, "--plot", help="Time histories, phase portrait, energy (.png/.svg)."),
+    fmt: TableFormat = typer.Option(TableFormat.text, "--format", "-f", help="Format of the summary."),
+    set_: Optional[List[str]] = SetOption,
+) -> None:
+    """Integrate the equations of motion from the file's initial state and report speed and accuracy measures."""
+
+    def body() -> int:
+        import time as _time
+
+        from mechsys.analysis.simulate import simulate as run_simulation
+        from mechsys.report.simulation import plot_histories, result_text, summary_table
+
+        if output is not None:
+            result_text([], __import__("numpy").zeros((0, 0)), output.suffix)  # reject a bad suffix first
+        t0 = _time.perf_counter()
+        model = load_model(file, set_)
+        result = run_simulation(model, t_end, dt, method, rtol, atol)
+        result.timings = {"load": _time.perf_counter() - t0 - sum(result.timings.values()), **result.timings}
+        names, data = result.columns()
+        if output is not None:
+            write_atomic(output, result_text(names, data, output.suffix))
+        if plot is not None:
+            plot_histories(names, data, str(plot))
+        emit_tables(summary_table(result), fmt, None)
+        return 0
+
+    run(body)
+
+
+@app.command()
+def bench(
+    file: Path = typer.Argument(..., help="Model file (YAML)."),
+    t_end: float = typer.Option(5.0, "--t-end", help="Horizon [s] (inside the predictability horizon)."),
+    methods: str = typer.Option("RK45,DOP853,Radau,LSODA", "--methods", help="Comma-separated methods."),
+    rtols: str = typer.Option("1e-4,1e-6,1e-8,1e-10", "--rtols", help="Comma-separated relative tolerances."),
+    plot: Optional[Path] = typer.Option(None, "--plot", help="Work-precision diagram (.png/.svg)."),
+    fmt: TableFormat = typer.Option(TableFormat.text, "--format", "-f", help="Output format."),
+    set_: Optional[List[str]] = SetOption,
+    output: Optional[Path] = OutputOption,
+) -> None:
+    """Speed against error: wall time, RHS evaluations, final error, energy drift and constraint residual for a
+    grid of methods and tolerances, against a tight reference solution."""
+
+    def body() -> int:
+        from mechsys.analysis.simulate import METHODS
+        from mechsys.analysis.workprecision import plot_work_precision, work_precision
+        from mechsys.report.tables import Table
+
+        chosen = [m.strip() for m in methods.split(",") if m.strip()]
+        bad = [m for m in chosen if m not in METHODS or m == "auto"]
+        if bad:
+            raise InputError(f"--methods: unknown {', '.join(bad)} (choose from {', '.join(METHODS[1:])})")
+        try:
+            tols = [float(x) for x in rtols.split(",") if x.strip()]
+        except ValueError:
+            raise InputError(f"--rtols {rtols!r}: expected comma-separated numbers") from None
+        points, ref_seconds = work_precision(load_model(file, set_), t_end, chosen, tols)
+        t = Table("work-precision (reference: DOP853, rtol 1e-13)",
+                  ["method", "rtol", "wall time [s]", "RHS evaluations", "final error", "energy drift",
+                   "constraint residual", "note"])
+        for p in points:
+            t.add(p.method, p.rtol, p.seconds, p.rhs_evaluations, p.final_error, p.energy_drift, p.residual, p.failed)
+        t.notes.append(f"reference run: {ref_seconds:.3g} s")
+        if plot is not None:
+            plot_work_precision(points, str(plot))
+        emit_tables([t], fmt, output)
+        return 0
+
+    run(body)
+
+
+@app.command("plot")
+def plot_result(
+    result: Path = typer.Argument(..., help="A result file written by `mechsys simulate` (.csv or .json)."),
+    output: Path = typer.Option(..., "--output", "-o", help="Figure file (.png, .svg, .pdf)."),
+) -> None:
+    """Plot an existing simulation result: time histories, rates, energy and a phase portrait."""
+
+    def body() -> int:
+        from mechsys.report.simulation import plot_histories, read_result
+
+        names, data = read_result(result)
+        plot_histories(names, data, str(output))
+        return 0
+
+    run(body)
+
+
+@app.command("export")
+def export_result(
+    result: Path = typer.Argument(..., help="A result file written by `mechsys simulate` (.csv or .json)."),
+    output: Path = typer.Option(..., "--output", "-o", help="Converted file (.csv or .json), written atomically."),
+) -> None:
+    """Convert a simulation result between CSV and JSON."""
+
+    def body() -> int:
+        from mechsys.report.simulation import read_result, result_text
+
+        names, data = read_result(result)
+        write_atomic(output, result_text(names, data, output.suffix))
         return 0
 
     run(body)

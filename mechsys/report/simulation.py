@@ -1,0 +1,96 @@
+"""Simulation outputs: result files (CSV, JSON by suffix), the run summary table and time-history plots."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from mechsys.errors import InputError
+from mechsys.report.tables import Table
+
+
+def result_text(names: list[str], data: np.ndarray, suffix: str) -> str:
+    if suffix == ".json":
+        return json.dumps({"columns": names, "data": data.tolist()}) + "\n"
+    if suffix in (".csv", ""):
+        lines = [",".join(names)] + [",".join(repr(float(x)) for x in row) for row in data]
+        return "\n".join(lines) + "\n"
+    raise InputError(f"unsupported result file suffix {suffix!r} (use .csv or .json)")
+
+
+def read_result(path: Path) -> tuple[list[str], np.ndarray]:
+    """Read a result file written by `mechsys simulate` (CSV or JSON)."""
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except OSError as exc:
+        raise InputError(f"{path}: cannot read ({exc.strerror})") from None
+    try:
+        if Path(path).suffix == ".json":
+            obj = json.loads(text)
+            return list(obj["columns"]), np.array(obj["data"], dtype=float)
+        lines = [ln for ln in text.splitlines() if ln.strip()]
+        names = lines[0].split(",")
+        data = np.array([[float(x) for x in ln.split(",")] for ln in lines[1:]], dtype=float)
+        if data.ndim != 2 or data.shape[1] != len(names):
+            raise ValueError
+        return names, data
+    except (ValueError, KeyError, IndexError, json.JSONDecodeError):
+        raise InputError(f"{path}: not a mechsys result file (CSV with a header row, or JSON)") from None
+
+
+def summary_table(result) -> list[Table]:
+    t = Table("simulation summary", ["quantity", "value"])
+    t.add("method", result.method)
+    t.add("output points", len(result.t))
+    t.add("RHS evaluations", result.rhs_evaluations)
+    for c, q, u in zip(result.coordinates, result.q[-1], result.u[-1]):
+        t.add(f"{c}(t_end)", float(q))
+        t.add(f"der({c})(t_end)", float(u))
+    t.add("energy E(t_end) - E(0)", float(result.E[-1] - result.E[0]))
+    t.add("max relative energy drift", result.energy_drift)
+    t.add("max constraint residual", float(np.max(result.residual)) if len(result.residual) else 0.0)
+    for k, v in result.timings.items():
+        t.add(f"wall time: {k} [s]", float(v))
+    t.notes += result.warnings
+    return [t]
+
+
+def plot_histories(names: list[str], data: np.ndarray, path: str) -> None:
+    """Coordinates, rates, energy and a phase portrait of the first coordinate."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    if "t" not in names:
+        raise InputError("the result has no 't' column")
+    t = data[:, names.index("t")]
+    coords = [n for n in names if n not in ("t", "T", "V", "E", "residual") and not n.startswith("der(")]
+    fig, axes = plt.subplots(2, 2, figsize=(10, 7))
+    for c in coords:
+        axes[0, 0].plot(t, data[:, names.index(c)], label=c)
+        if f"der({c})" in names:
+            axes[0, 1].plot(t, data[:, names.index(f"der({c})")], label=f"der({c})")
+    axes[0, 0].set_title("coordinates")
+    axes[0, 1].set_title("rates")
+    if "E" in names:
+        E = data[:, names.index("E")]
+        axes[1, 0].plot(t, E - E[0])
+        axes[1, 0].set_title("energy E(t) - E(0)")
+    # phase portrait of the coordinate with the smallest range (a cyclic angle's portrait says little)
+    bounded = sorted(coords, key=lambda c: float(np.ptp(data[:, names.index(c)])))
+    if bounded and f"der({bounded[0]})" in names:
+        c0 = bounded[0]
+        axes[1, 1].plot(data[:, names.index(c0)], data[:, names.index(f"der({c0})")])
+        axes[1, 1].set_title(f"phase portrait of {c0}")
+        coords = [c0] + [c for c in coords if c != c0]
+    for ax in axes.flat:
+        ax.grid(True, alpha=0.3)
+        ax.set_xlabel("t [s]" if ax is not axes[1, 1] else (coords[0] if coords else ""))
+    for ax in axes[0]:
+        if ax.lines:
+            ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)

@@ -1,0 +1,61 @@
+"""`mechsys simulate`, `bench`, `plot`, `export` from the command line: files, formats, exit codes."""
+import json
+from pathlib import Path
+
+import numpy as np
+from typer.testing import CliRunner
+
+from mechsys.cli import app
+
+ROOT = Path(__file__).resolve().parents[1]
+runner = CliRunner()
+
+
+def invoke(*args):
+    return runner.invoke(app, [str(a) for a in args])
+
+
+def test_simulate_writes_csv_with_the_documented_columns(tmp_path):
+    out = tmp_path / "p1.csv"
+    r = invoke("simulate", ROOT / "systems" / "motor_arm.yaml", "--t-end", 2, "--dt", 0.1, "-o", out, "-f", "json")
+    assert r.exit_code == 0, r.output
+    header = out.read_text().splitlines()[0].split(",")
+    assert header == ["t", "alpha", "beta", "der(alpha)", "der(beta)", "T", "V", "E", "residual"]
+    rows = out.read_text().splitlines()[1:]
+    assert len(rows) == 21 and float(rows[-1].split(",")[0]) == 2.0
+    summary = json.loads(r.stdout)
+    assert "simulation summary" in summary
+
+
+def test_export_round_trip_and_plot(tmp_path):
+    csv_path, json_path, png = tmp_path / "r.csv", tmp_path / "r.json", tmp_path / "r.png"
+    assert invoke("simulate", ROOT / "systems" / "double_pendulum.yaml", "--t-end", 1, "--dt", 0.05,
+                  "-o", csv_path).exit_code == 0
+    assert invoke("export", csv_path, "-o", json_path).exit_code == 0
+    data = json.loads(json_path.read_text())
+    values = np.array([[float(x) for x in ln.split(",")] for ln in csv_path.read_text().splitlines()[1:]])
+    assert data["columns"][0] == "t" and np.array_equal(np.array(data["data"]), values)
+    assert invoke("plot", json_path, "-o", png).exit_code == 0 and png.stat().st_size > 1000
+
+
+def test_bad_inputs_exit_2(tmp_path):
+    model = ROOT / "systems" / "motor_arm.yaml"
+    assert invoke("simulate", model, "-o", tmp_path / "x.txt").exit_code == 2
+    assert invoke("bench", model, "--methods", "Euler").exit_code == 2
+    bad = tmp_path / "bad.csv"
+    bad.write_text("not a result\n1,2\n")
+    assert invoke("plot", bad, "-o", tmp_path / "x.png").exit_code == 2
+
+
+def test_unknown_method_is_an_analysis_error():
+    assert invoke("simulate", ROOT / "systems" / "motor_arm.yaml", "--method", "Euler").exit_code == 1
+
+
+def test_bench_table_has_every_method_and_tolerance():
+    r = invoke("bench", ROOT / "systems" / "double_pendulum.yaml", "--t-end", 0.5, "--methods", "RK45,DOP853",
+               "--rtols", "1e-6,1e-9", "-f", "csv")
+    assert r.exit_code == 0, r.output
+    lines = r.stdout.strip().splitlines()
+    assert lines[0].startswith("method,rtol") and len(lines) == 5
+    errors = {(ln.split(",")[0], ln.split(",")[1]): float(ln.split(",")[4]) for ln in lines[1:]}
+    assert errors[("DOP853", "1e-09")] < errors[("DOP853", "1e-06")] < 1e-4
