@@ -5,6 +5,7 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
+import sympy as sp
 from scipy.integrate import solve_ivp
 
 from mechsys.analysis.equilibria import parameter_values
@@ -26,6 +27,7 @@ class Compiled:
     phi: object
     T: object
     V: object
+    cv: object  # velocity-level constraint expressions (A u + a_t)
     n: int
     m: int
     seconds: float
@@ -43,11 +45,10 @@ def compile_model(model: MechanicalModel) -> Compiled:
     b = compile_matrix(model.constraint_rhs, *args)
     phi = compile_matrix(model.holonomic_constraints if model.holonomic_constraints.shape[0] else
                          model.constraint_jacobian[:0, :1], *args)
-    import sympy as sp
-
     T = compile_matrix(sp.Matrix([model.kinetic_energy]), *args)
     V = compile_matrix(sp.Matrix([model.potential_energy]), *args)
-    out = Compiled(eqs, A, b, phi, T, V, len(model.q), model.constraint_jacobian.shape[0],
+    cv = compile_matrix(model.constraint_velocity if model.kin.constraints else sp.zeros(0, 1), *args)
+    out = Compiled(eqs, A, b, phi, T, V, cv, len(model.q), model.constraint_jacobian.shape[0],
                    time.perf_counter() - t0)
     model._simulation_compiled = out
     return out
@@ -67,6 +68,7 @@ class SimulationResult:
     steps: int
     timings: dict = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)
+    driving: dict = field(default_factory=dict)  # prescribed coordinate -> driving force/torque at each output
 
     @property
     def E(self) -> np.ndarray:
@@ -80,7 +82,9 @@ class SimulationResult:
 
     def columns(self) -> tuple[list[str], np.ndarray]:
         names = ["t", *self.coordinates, *[f"der({c})" for c in self.coordinates], "T", "V", "E", "residual"]
-        data = np.column_stack([self.t, self.q, self.u, self.T, self.V, self.E, self.residual])
+        names += [f"driving({c})" for c in self.driving]
+        data = np.column_stack([self.t, self.q, self.u, self.T, self.V, self.E, self.residual,
+                                *self.driving.values()])
         return names, data
 
 
@@ -125,9 +129,7 @@ def project(c: Compiled, p: np.ndarray, t: float, q: np.ndarray, u: np.ndarray) 
         hol = A[: phi.size]
         q = q - np.linalg.lstsq(hol, phi, rcond=None)[0]
     A = c.A(t, q, u, p)
-    # velocity constraints are A u + a_t = 0; a_t from one evaluation at u = 0 is not compiled separately,
-    # so project onto the null space of A around the current velocity (scleronomic constraints)
-    r = A @ u
+    r = c.cv(t, q, u, p).ravel()  # A u + a_t: rheonomic drive constraints have a_t = -p'(t)
     u = u - np.linalg.lstsq(A, r, rcond=None)[0]
     return q, u
 
@@ -214,5 +216,11 @@ def simulate(model: MechanicalModel, t_end: float, dt: float | None = None, meth
         res = np.array([np.max(np.abs(c.phi(t, qi, ui, p))) for t, qi, ui in zip(grid, q, u)])
     else:
         res = np.zeros(len(grid))
+    driving = {}
+    rows = [k for k, con in enumerate(model.kin.constraints) if con.name.startswith("drive(")]
+    if rows:
+        lams = np.array([rhs.accelerations(t, qi, ui)[1] for t, qi, ui in zip(grid, q, u)])
+        for k in rows:
+            driving[model.kin.constraints[k].name[6:-1]] = lams[:, k]
     return SimulationResult(list(model.coordinates), grid, q, u, T, V, res, chosen, rhs.calls, steps, timings,
-                            warnings)
+                            warnings, driving)

@@ -377,6 +377,10 @@ class Builder:
 
     # ------------------------------------------------------------------------------------- constraints
     def build_constraints(self) -> None:
+        for name, motion in self.doc.released.items():
+            phi = self.doc.coords[name] - motion
+            self.kin.constraints.append(ConstraintRow(f"drive({name})", "holonomic", phi, self.rate_of(phi)))
+            self.kin.constraint_elements.append(("drive", 1))
         for i, c in enumerate(self.doc.spec.constraints):
             cp: Path = ("constraints", i)
             name = c.name or f"{c.type}_{i + 1}"

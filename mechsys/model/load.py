@@ -45,6 +45,7 @@ class Document:
     initial: dict[str, float] = field(default_factory=dict)
     initial_rate: dict[str, float] = field(default_factory=dict)
     overridden: dict[tuple, str] = field(default_factory=dict)  # key path -> the --set text that replaced it
+    released: dict[str, sp.Expr] = field(default_factory=dict)  # prescribed coordinates turned into drive constraints
 
     # ------------------------------------------------------------------------------------- errors
     def error(self, path: Path, message: str, key: bool = False) -> InputError:
@@ -326,8 +327,11 @@ def _hint(name: str, options: list[str]) -> str:
 
 
 # ----------------------------------------------------------------------------------------- entry point
-def read_document(path: str | os.PathLike, overrides: Mapping[str, Any] | None = None) -> Document:
-    """Read and validate a model file, resolve parameters and coordinates; raise InputError on bad input."""
+def read_document(path: str | os.PathLike, overrides: Mapping[str, Any] | None = None,
+                  release_prescribed: bool = False) -> Document:
+    """Read and validate a model file, resolve parameters and coordinates; raise InputError on bad input.
+    ``release_prescribed`` turns each prescribed coordinate into a free one held by q - p(t) = 0 (its
+    multiplier is then the driving force: inverse dynamics)."""
     file = os.fspath(path)
     try:
         with open(file, encoding="utf-8") as fh:
@@ -350,11 +354,11 @@ def read_document(path: str | os.PathLike, overrides: Mapping[str, Any] | None =
         raise _pydantic_to_input_error(exc, data, pos, file) from None
     doc = Document(file=file, spec=spec, raw=data, positions=pos, overridden=replaced)
     doc._text = text
-    _resolve_symbols(doc)
+    _resolve_symbols(doc, release_prescribed)
     return doc
 
 
-def _resolve_symbols(doc: Document) -> None:
+def _resolve_symbols(doc: Document, release_prescribed: bool = False) -> None:
     spec = doc.spec
     for name in spec.parameters:
         if name in RESERVED:
@@ -373,7 +377,18 @@ def _resolve_symbols(doc: Document) -> None:
                     raise doc.error(("coordinates", name, key),
                                     f"a prescribed coordinate has no free {key}: its motion is given by 'prescribed'",
                                     key=True)
-            doc.prescribed[name] = doc.parse(c.prescribed, ("coordinates", name, "prescribed"), "prescribed")
+            motion = doc.parse(c.prescribed, ("coordinates", name, "prescribed"), "prescribed")
+            if not release_prescribed:
+                doc.prescribed[name] = motion
+                continue
+            # inverse dynamics: a free coordinate held on q - p(t) = 0, whose multiplier is the driving force
+            doc.released[name] = motion
+            doc.coords[name] = sp.Symbol(name, real=True)
+            doc.rates[name] = rate_symbol(name)
+            doc.accels[name] = accel_symbol(name)
+            values = {k: sp.Float(v) for k, v in doc.numeric_parameters().items()}
+            doc.initial[name] = float(motion.xreplace(values).xreplace({T: 0}).evalf())
+            doc.initial_rate[name] = float(sp.diff(motion, T).xreplace(values).xreplace({T: 0}).evalf())
         else:
             doc.coords[name] = sp.Symbol(name, real=True)
             doc.rates[name] = rate_symbol(name)
