@@ -31,25 +31,41 @@ class Compiled:
     n: int
     m: int
     seconds: float
+    cache_hit: bool = False
 
 
 def compile_model(model: MechanicalModel) -> Compiled:
+    """Everything a simulation evaluates, compiled once per model and cached on disk (see numeric/cache.py):
+    a second run of the same model structure skips derivation and compilation."""
     cached = getattr(model, "_simulation_compiled", None)
     if cached is not None:
         return cached
+    from mechsys.numeric import cache
+    from mechsys.numeric.kane import equations_from_source, equations_source
+    from mechsys.numeric.lambdify import matrix_from_source, matrix_source
+
     t0 = time.perf_counter()
-    params = model.parameter_symbols
-    args = (model.t, model.q, model.u, params)
-    eqs = compile_equations(model)
-    A = compile_matrix(model.constraint_jacobian, *args)
-    b = compile_matrix(model.constraint_rhs, *args)
-    phi = compile_matrix(model.holonomic_constraints if model.holonomic_constraints.shape[0] else
-                         model.constraint_jacobian[:0, :1], *args)
-    T = compile_matrix(sp.Matrix([model.kinetic_energy]), *args)
-    V = compile_matrix(sp.Matrix([model.potential_energy]), *args)
-    cv = compile_matrix(model.constraint_velocity if model.kin.constraints else sp.zeros(0, 1), *args)
-    out = Compiled(eqs, A, b, phi, T, V, cv, len(model.q), model.constraint_jacobian.shape[0],
-                   time.perf_counter() - t0)
+    key = cache.model_key(model, "simulate")
+    desc = cache.load(key)
+    hit = desc is not None
+    if not hit:
+        args = (model.t, model.q, model.u, model.parameter_symbols)
+        hol = model.holonomic_constraints if model.holonomic_constraints.shape[0] else sp.zeros(0, 1)
+        desc = {
+            "eqs": equations_source(model),
+            "A": matrix_source(model.constraint_jacobian, *args),
+            "b": matrix_source(model.constraint_rhs, *args),
+            "phi": matrix_source(hol, *args),
+            "T": matrix_source(sp.Matrix([model.kinetic_energy]), *args),
+            "V": matrix_source(sp.Matrix([model.potential_energy]), *args),
+            "cv": matrix_source(model.constraint_velocity if model.kin.constraints else sp.zeros(0, 1), *args),
+            "n": len(model.q), "m": len(model.kin.constraints),
+        }
+        cache.store(key, desc)
+    out = Compiled(equations_from_source(desc["eqs"]), *(matrix_from_source(desc[k]) for k in
+                                                             ("A", "b", "phi", "T", "V", "cv")),
+                   desc["n"], desc["m"], time.perf_counter() - t0)
+    out.cache_hit = hit
     model._simulation_compiled = out
     return out
 
@@ -167,7 +183,8 @@ def simulate(model: MechanicalModel, t_end: float, dt: float | None = None, meth
     timings = {}
     t0 = time.perf_counter()
     c = compile_model(model)
-    timings["derive + compile"] = time.perf_counter() - t0
+    timings["derive + compile" if not getattr(c, "cache_hit", False) else "load compiled code (cached)"] = \
+        time.perf_counter() - t0
     p = parameter_values(model) if overrides_p is None else overrides_p
     q0 = np.array([model.doc.initial[n] for n in model.coordinates], dtype=float)
     u0 = np.array([model.doc.initial_rate[n] for n in model.coordinates], dtype=float)

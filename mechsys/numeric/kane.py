@@ -11,7 +11,7 @@ from typing import Sequence
 import numpy as np
 import sympy as sp
 
-from mechsys.numeric.lambdify import compile_exprs
+from mechsys.numeric.lambdify import function_from_source, generate_source
 
 
 @dataclass
@@ -49,6 +49,15 @@ class CompiledEquations:
 
 def compile_equations(model) -> CompiledEquations:
     """Compile the model's Kane terms into one numpy function (parameters stay inputs)."""
+    return equations_from_source(equations_source(model))
+
+
+def equations_from_source(desc: dict) -> CompiledEquations:
+    return CompiledEquations(desc["n"], [tuple(b) for b in desc["bodies"]], function_from_source(desc["source"]))
+
+
+def equations_source(model) -> dict:
+    """Cacheable description of the staged equations: sizes, body layout and generated source."""
     n = len(model.q)
     pieces: list = []
     other = model.generalized_forces.copy()
@@ -69,5 +78,5 @@ def compile_equations(model) -> CompiledEquations:
         if has_inertia:
             pieces += [*Jw, *b.inertia, *frame.alpha, *w]
         layout.append((has_mass, has_inertia))
-    fn = compile_exprs(pieces, [model.t, *model.q, *model.u, *model.parameter_symbols])
-    return CompiledEquations(n, layout, fn)
+    source = generate_source(pieces, [model.t, *model.q, *model.u, *model.parameter_symbols])
+    return {"n": n, "bodies": [list(b) for b in layout], "source": source}

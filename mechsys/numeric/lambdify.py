@@ -30,8 +30,8 @@ class _Printer(PythonCodePrinter):
         return "0.0"
 
 
-def compile_exprs(exprs: Sequence[sp.Expr], args: Sequence[sp.Symbol]) -> Callable[..., list[float]]:
-    """A function of ``args`` returning the list of ``exprs`` as floats (shared subexpressions computed once)."""
+def generate_source(exprs: Sequence[sp.Expr], args: Sequence[sp.Symbol]) -> str:
+    """Python source of ``_f(a0, a1, ...)`` returning ``exprs`` (shared subexpressions computed once)."""
     names = {a: f"a{i}" for i, a in enumerate(args)}
     exprs = [sp.sympify(e) for e in exprs]
     replacements, reduced = sp.cse(exprs, order="none")
@@ -41,10 +41,20 @@ def compile_exprs(exprs: Sequence[sp.Expr], args: Sequence[sp.Symbol]) -> Callab
     lines = [f"def _f({', '.join(names[a] for a in args)}):"]
     lines += [f"    {names[sym]} = {printer.doprint(value)}" for sym, value in replacements]
     lines.append("    return [" + ", ".join(printer.doprint(e) for e in reduced) + "]")
+    return "\n".join(lines)
+
+
+def function_from_source(source: str) -> Callable[..., list[float]]:
+    """The function defined by generated source (printed by sympy from parsed expressions, or read back from
+    mechsys's own cache): no user text reaches it."""
     namespace: dict = {"math": math}
-    # The source is printed by sympy from expressions built by the whitelist parser: no user text reaches it.
-    exec(compile("\n".join(lines), "<mechsys-generated>", "exec"), namespace)  # noqa: S102
+    exec(compile(source, "<mechsys-generated>", "exec"), namespace)  # noqa: S102
     return namespace["_f"]
+
+
+def compile_exprs(exprs: Sequence[sp.Expr], args: Sequence[sp.Symbol]) -> Callable[..., list[float]]:
+    """A function of ``args`` returning the list of ``exprs`` as floats (shared subexpressions computed once)."""
+    return function_from_source(generate_source(exprs, args))
 
 
 @dataclass
@@ -61,10 +71,22 @@ class StateFunction:
         return np.array(out, dtype=float).reshape(self.shape)
 
 
+def matrix_source(expr: sp.Matrix, t: sp.Symbol, q: Sequence[sp.Symbol], u: Sequence[sp.Symbol],
+                  params: Sequence[sp.Symbol]) -> dict:
+    """Cacheable description of a compiled matrix: shape and generated source."""
+    expr = sp.Matrix(expr)
+    empty = expr.shape[0] == 0 or expr.shape[1] == 0
+    return {"shape": list(expr.shape), "source": None if empty else generate_source(list(expr), [t, *q, *u, *params])}
+
+
+def matrix_from_source(desc: dict) -> StateFunction:
+    shape = tuple(desc["shape"])
+    if desc["source"] is None:
+        return StateFunction(shape, lambda *a: [])
+    return StateFunction(shape, function_from_source(desc["source"]))
+
+
 def compile_matrix(expr: sp.Matrix, t: sp.Symbol, q: Sequence[sp.Symbol], u: Sequence[sp.Symbol],
                    params: Sequence[sp.Symbol]) -> StateFunction:
     """A function of (t, q..., u..., p...) for ``expr`` (a Matrix), entries row by row."""
-    expr = sp.Matrix(expr)
-    if expr.shape[0] == 0 or expr.shape[1] == 0:
-        return StateFunction(expr.shape, lambda *a: [])
-    return StateFunction(expr.shape, compile_exprs(list(expr), [t, *q, *u, *params]))
+    return matrix_from_source(matrix_source(expr, t, q, u, params))
