@@ -37,10 +37,27 @@ def _structure(raw: dict) -> dict:
     return data
 
 
+_FINGERPRINT: str | None = None
+
+
+def code_fingerprint() -> str:
+    """Hash of the code that derives and generates (so a development change never reuses stale entries)."""
+    global _FINGERPRINT
+    if _FINGERPRINT is None:
+        root = Path(__file__).resolve().parents[1]
+        digest = hashlib.sha256()
+        for sub in ("model", "mechanics", "numeric"):
+            for f in sorted((root / sub).glob("*.py")):
+                digest.update(f.read_bytes())
+        _FINGERPRINT = digest.hexdigest()[:16]
+    return _FINGERPRINT
+
+
 def model_key(model, what: str) -> str:
     from mechsys import __version__
 
-    payload = {"version": __version__, "what": what, "structure": _structure(model.doc.raw),
+    payload = {"version": __version__, "code": code_fingerprint(), "what": what,
+               "structure": _structure(model.doc.raw),
                "released": sorted(model.doc.released)}
     return hashlib.sha256(json.dumps(payload, sort_keys=True).encode()).hexdigest()[:32]
 
