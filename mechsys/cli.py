@@ -375,6 +375,7 @@ def simulate(
     atol: float = typer.Option(1e-12, "--atol", help="Absolute tolerance."),
     output: Optional[Path] = typer.Option(None, "--output", "-o", help="Result file: .csv or .json (atomic)."),
     plot: Optional[Path] = typer.Option(None, "--plot", help="Time histories, phase portrait, energy (.png/.svg)."),
+    events_file: Optional[Path] = typer.Option(None, "--events", help="Write the recorded events (.csv or .json)."),
     fmt: TableFormat = typer.Option(TableFormat.text, "--format", "-f", help="Format of the summary."),
     set_: Optional[List[str]] = SetOption,
 ) -> None:
@@ -401,6 +402,10 @@ def simulate(
             write_atomic(output, result_text(names, data, output.suffix))
         if plot is not None:
             plot_histories(names, data, str(plot))
+        if events_file is not None:
+            from mechsys.report.simulation import events_text
+
+            write_atomic(events_file, events_text(result.events, result.coordinates, events_file.suffix))
         emit_tables(summary_table(result), fmt, None)
         return 0
 

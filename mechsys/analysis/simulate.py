@@ -32,6 +32,7 @@ class Compiled:
     m: int
     seconds: float
     cache_hit: bool = False
+    events: object = None
 
 
 def compile_model(model: MechanicalModel) -> Compiled:
@@ -60,12 +61,15 @@ def compile_model(model: MechanicalModel) -> Compiled:
             "V": matrix_source(sp.Matrix([model.potential_energy]), *args),
             "cv": matrix_source(model.constraint_velocity if model.kin.constraints else sp.zeros(0, 1), *args),
             "n": len(model.q), "m": len(model.kin.constraints),
+            "events": matrix_source(sp.Matrix([e[1] for e in model.events]) if model.events else sp.zeros(0, 1),
+                                    *args),
         }
         cache.store(key, desc)
     out = Compiled(equations_from_source(desc["eqs"]), *(matrix_from_source(desc[k]) for k in
                                                              ("A", "b", "phi", "T", "V", "cv")),
                    desc["n"], desc["m"], time.perf_counter() - t0)
     out.cache_hit = hit
+    out.events = matrix_from_source(desc["events"])
     model._simulation_compiled = out
     return out
 
@@ -85,6 +89,7 @@ class SimulationResult:
     timings: dict = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)
     driving: dict = field(default_factory=dict)  # prescribed coordinate -> driving force/torque at each output
+    events: list[dict] = field(default_factory=list)  # {"t", "event", "state": {...}} in time order
 
     @property
     def E(self) -> np.ndarray:
@@ -150,6 +155,20 @@ def project(c: Compiled, p: np.ndarray, t: float, q: np.ndarray, u: np.ndarray) 
     return q, u
 
 
+def _event_functions(model: MechanicalModel, c: Compiled, p: np.ndarray) -> list:
+    """scipy event callables g(t, y) for the file's events; direction and terminal set from the YAML.
+    The collide issue plugs impacts in here: an action other than record/stop can re-initialize the state."""
+    n = c.n
+    fns = []
+    for k, (_name, _expr, direction, action) in enumerate(model.events):
+        def g(t, y, k=k):
+            return float(c.events(t, y[:n], y[n:], p)[k, 0])
+        g.direction = {"rising": 1.0, "falling": -1.0, "both": 0.0}[direction]
+        g.terminal = action == "stop"
+        fns.append(g)
+    return fns
+
+
 def stiffness(rhs: RightHandSide, t0: float, y0: np.ndarray, t_end: float) -> tuple[float, float]:
     """(spectral radius of the RHS Jacobian, stiffness ratio) at the start, by finite differences; a heuristic
     for choosing an implicit method, never used for results."""
@@ -206,25 +225,54 @@ def simulate(model: MechanicalModel, t_end: float, dt: float | None = None, meth
     n = c.n
     ys = [np.concatenate([q0, u0])]
     steps = 0
+    event_fns = _event_functions(model, c, p)
+    recorded: list[dict] = []
+
+    def note_events(sol) -> bool:
+        """Record the crossings of this solve; True when a stopping event fired."""
+        stop = False
+        for k, (times, states) in enumerate(zip(sol.t_events or [], sol.y_events or [])):
+            for t_ev, y_ev in zip(times, states):
+                name, _expr, _direction, action = model.events[k]
+                recorded.append({"t": float(t_ev), "event": name, "action": action,
+                                 "state": {**{cn: float(v) for cn, v in zip(model.coordinates, y_ev[:n])},
+                                           **{f"der({cn})": float(v) for cn, v in zip(model.coordinates, y_ev[n:])}}})
+                stop = stop or action == "stop"
+        return stop
+
     if c.m:
         # closed loops: integrate output interval by output interval and project onto the constraints
         y = ys[0]
+        times = [0.0]
         for a, b in zip(grid[:-1], grid[1:]):
-            sol = solve_ivp(rhs, (a, b), y, method=chosen, rtol=rtol, atol=atol)
+            sol = solve_ivp(rhs, (a, b), y, method=chosen, rtol=rtol, atol=atol, events=event_fns or None)
             if not sol.success:
                 raise AnalysisError(f"integration failed at t = {sol.t[-1]:.6g}: {sol.message}")
             steps += len(sol.t) - 1
-            q, u = project(c, p, b, sol.y[:n, -1], sol.y[n:, -1])
+            q, u = project(c, p, float(sol.t[-1]), sol.y[:n, -1], sol.y[n:, -1])
             y = np.concatenate([q, u])
             ys.append(y)
+            times.append(float(sol.t[-1]))
+            if sol.status == 1 and note_events(sol):
+                break
+            if sol.status != 1:
+                note_events(sol)
         Y = np.array(ys)
+        grid = np.array(times)
     else:
         sol = solve_ivp(rhs, (0.0, float(grid[-1])), ys[0], method=chosen, t_eval=grid, rtol=rtol, atol=atol,
-                        dense_output=False)
+                        events=event_fns or None)
         if not sol.success:
             raise AnalysisError(f"integration failed at t = {sol.t[-1]:.6g}: {sol.message}")
-        steps = int(getattr(sol, "nfev", 0) and len(sol.t))
+        steps = len(sol.t)
         Y = sol.y.T
+        grid = sol.t
+        if note_events(sol) and sol.y_events is not None:
+            # a stopping event: the last output row is the state at the event
+            k, t_stop = min(((k, ts[-1]) for k, ts in enumerate(sol.t_events)
+                             if len(ts) and model.events[k][3] == "stop"), key=lambda kv: kv[1])
+            Y = np.vstack([Y[grid < t_stop], sol.y_events[k][-1]])
+            grid = np.append(grid[grid < t_stop], t_stop)
     timings["integrate"] = time.perf_counter() - t1
     q, u = Y[:, :n], Y[:, n:]
     T = np.array([c.T(t, qi, ui, p)[0, 0] for t, qi, ui in zip(grid, q, u)])
@@ -239,5 +287,6 @@ def simulate(model: MechanicalModel, t_end: float, dt: float | None = None, meth
         lams = np.array([rhs.accelerations(t, qi, ui)[1] for t, qi, ui in zip(grid, q, u)])
         for k in rows:
             driving[model.kin.constraints[k].name[6:-1]] = lams[:, k]
+    recorded.sort(key=lambda ev: ev["t"])
     return SimulationResult(list(model.coordinates), grid, q, u, T, V, res, chosen, rhs.calls, steps, timings,
-                            warnings, driving)
+                            warnings, driving, recorded)

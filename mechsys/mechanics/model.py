@@ -54,6 +54,7 @@ class MechanicalModel:
         self.a = [doc.accels[n] for n in self.coordinates]
         self.t = TIME
         self._eqs: dict[str, Equations] = {}
+        self.events  # parse now: a bad expression is an input error at load time
 
     # ------------------------------------------------------------------------------------- basics
     @property
@@ -258,6 +259,19 @@ class MechanicalModel:
                 M += Jw.T * I * Jw
                 f -= Jw.T * (I * frame.alpha + w.cross(I * w))  # Euler's equations in body axes
         return M, f
+
+    @cached_property
+    def events(self) -> list[tuple[str, sp.Expr, str, str]]:
+        """(name, expression, direction, action) of the file's events, expressions in q, der(q), t."""
+        out = []
+        names = set()
+        for i, ev in enumerate(self.doc.spec.events):
+            if ev.name in names:
+                raise self.doc.error(("events", i, "name"), f"duplicate event name {ev.name!r}")
+            names.add(ev.name)
+            expr = self.doc.parse(ev.expression, ("events", i, "expression"), "force")
+            out.append((ev.name, expr, ev.direction, ev.action))
+        return out
 
     # ------------------------------------------------------------------------------------- classification
     @property

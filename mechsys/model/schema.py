@@ -315,6 +315,16 @@ ForceSpec = Annotated[
 ]
 
 
+# ----------------------------------------------------------------------------------------- events
+class Event(Strict):
+    """A zero crossing of an expression during simulation: recorded, or stopping the integration."""
+
+    name: Name
+    expression: Expr = Field(description="expression of coordinates, der(q), parameters and t")
+    direction: Literal["rising", "falling", "both"] = "both"
+    action: Literal["record", "stop"] = "record"
+
+
 # ----------------------------------------------------------------------------------------- the file
 class System(Strict):
     """A mechanical system: the root of a mechsys YAML file."""
@@ -327,6 +337,7 @@ class System(Strict):
     links: dict[Name, Link] = Field(min_length=1)
     constraints: list[Constraint] = Field(default_factory=list)
     forces: list[ForceSpec] = Field(default_factory=list)
+    events: list[Event] = Field(default_factory=list)
 
     @field_validator("coordinates", mode="before")
     @classmethod

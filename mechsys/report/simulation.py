@@ -50,6 +50,9 @@ def summary_table(result) -> list[Table]:
     t.add("energy E(t_end) - E(0)", float(result.E[-1] - result.E[0]))
     t.add("max relative energy drift", result.energy_drift)
     t.add("max constraint residual", float(np.max(result.residual)) if len(result.residual) else 0.0)
+    t.add("events recorded", len(result.events))
+    for name, values in result.driving.items():
+        t.add(f"driving force on {name} at t_end", float(values[-1]))
     for k, v in result.timings.items():
         t.add(f"wall time: {k} [s]", float(v))
     t.notes += result.warnings
@@ -94,3 +97,16 @@ def plot_histories(names: list[str], data: np.ndarray, path: str) -> None:
     fig.tight_layout()
     fig.savefig(path)
     plt.close(fig)
+
+
+def events_text(events: list[dict], coordinates: list[str], suffix: str) -> str:
+    """The event table: t, event, action, then the state at the crossing."""
+    if suffix == ".json":
+        return json.dumps(events, indent=1) + "\n"
+    if suffix not in (".csv", ""):
+        raise InputError(f"unsupported events file suffix {suffix!r} (use .csv or .json)")
+    cols = [*coordinates, *[f"der({c})" for c in coordinates]]
+    lines = [",".join(["t", "event", "action", *cols])]
+    for ev in events:
+        lines.append(",".join([repr(ev["t"]), ev["event"], ev["action"], *[repr(ev["state"][c]) for c in cols]]))
+    return "\n".join(lines) + "\n"
