@@ -136,20 +136,28 @@ class EquilibriumProblem:
     def _args(self) -> list[sp.Symbol]:
         return self.unknowns + [self._u(c) for c in self.fixed_rates] + list(self.model.parameter_symbols)
 
+    def _memo(self, what: str, build):
+        """Compiled functions are kept on the model (shared by with_overrides copies): a sweep compiles once."""
+        store = self.model.__dict__.setdefault("_equilibrium_memo", {})
+        key = (what, tuple(self.rate_unknowns), tuple(self.fixed_rates))
+        if key not in store:
+            store[key] = build()
+        return store[key]
+
     @cached_property
     def _F(self):
-        return compile_exprs(list(self.residual_exprs), self._args)
+        return self._memo("F", lambda: compile_exprs(list(self.residual_exprs), self._args))
 
     @cached_property
     def _J(self):
-        return compile_exprs(list(self.residual_exprs.jacobian(self.unknowns)), self._args)
+        return self._memo("J", lambda: compile_exprs(list(self.residual_exprs.jacobian(self.unknowns)), self._args))
 
     def _dF_dp_exprs(self) -> sp.Matrix:
         return self.residual_exprs.jacobian(self.model.parameter_symbols)
 
     @cached_property
     def _Fp(self):
-        return compile_exprs(list(self._dF_dp_exprs()), self._args)
+        return self._memo("Fp", lambda: compile_exprs(list(self._dF_dp_exprs()), self._args))
 
     # ------------------------------------------------------------------------------------- numerics
     def extra(self) -> list[float]:
@@ -167,7 +175,11 @@ class EquilibriumProblem:
         return np.array(self._Fp(*z, *self.extra(), *p), dtype=float).reshape(len(self.residual_exprs), -1)
 
     def is_angle(self) -> np.ndarray:
-        return np.array([self.angles.get(c, False) for c in self.free] + [False] * (len(self.unknowns) - self.nq))
+        mask = self.__dict__.get("_angle_mask")
+        if mask is None:
+            mask = np.array([self.angles.get(c, False) for c in self.free] + [False] * (len(self.unknowns) - self.nq))
+            self.__dict__["_angle_mask"] = mask
+        return mask
 
     def normalize(self, z: np.ndarray) -> np.ndarray:
         z = z.copy()
@@ -202,27 +214,32 @@ def _newton(problem: EquilibriumProblem, z: np.ndarray, p: np.ndarray, roots: li
     """Deflated Newton (Farrell et al.): roots already found repel the iteration; backtracking on |G|."""
     n = len(z)
 
-    def G_and_JG(z: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        F = problem.F(z, p)
-        J = problem.J(z, p)
+    ang = problem.is_angle()
+
+    def deflation(z: np.ndarray) -> tuple[float, np.ndarray]:
         mu, grad_log = 1.0, np.zeros(n)
         for r in roots:
             d = z - r
-            ang = problem.is_angle()
-            d[ang] = [wrap(x) for x in d[ang]]
-            d2 = float(d @ d)
-            if d2 < 1e-28:
-                d2 = 1e-28
+            if ang.any():
+                d[ang] = np.remainder(d[ang] + np.pi, 2 * np.pi) - np.pi
+            d2 = max(float(d @ d), 1e-28)
             factor = 1.0 / d2 + 1.0
             mu *= factor
             grad_log += (-2.0 * d / d2**2) / factor
+        return mu, grad_log
+
+    def G_only(z: np.ndarray) -> float:
+        F = problem.F(z, p)
+        return float(np.linalg.norm(deflation(z)[0] * F)) if np.all(np.isfinite(F)) else np.inf
+
+    stalls = 0
+    for _ in range(max_iter):
+        F = problem.F(z, p)
+        J = problem.J(z, p)
+        mu, grad_log = deflation(z)
         G = mu * F
         JG = mu * J + np.outer(F, mu * grad_log)
-        return F, G, JG
-
-    for _ in range(max_iter):
-        F, G, JG = G_and_JG(z)
-        if not np.all(np.isfinite(JG)):
+        if not (np.all(np.isfinite(JG)) and np.all(np.isfinite(G))):
             return None
         try:
             step = np.linalg.lstsq(JG, -G, rcond=None)[0]
@@ -231,14 +248,16 @@ def _newton(problem: EquilibriumProblem, z: np.ndarray, p: np.ndarray, roots: li
         scale = 1.0
         g0 = float(np.linalg.norm(G))
         while scale > 1e-4:
-            trial = z + scale * step
             try:
-                g1 = float(np.linalg.norm(G_and_JG(trial)[1]))
+                g1 = G_only(z + scale * step)
             except (ValueError, ZeroDivisionError, OverflowError):
                 g1 = np.inf
             if np.isfinite(g1) and g1 <= (1 - 1e-4 * scale) * g0 + 1e-300:
                 break
             scale *= 0.5
+        stalls = stalls + 1 if scale < 1e-2 else 0
+        if stalls >= 4:
+            return None  # stagnating far from a root: another start will do better
         z = z + scale * step
         if np.linalg.norm(scale * step, np.inf) < 1e-12 * (1 + np.linalg.norm(z, np.inf)):
             break

@@ -56,6 +56,38 @@ class MechanicalModel:
         self._eqs: dict[str, Equations] = {}
         self.events  # parse now: a bad expression is an input error at load time
 
+    def with_overrides(self, values: dict[str, float]) -> "MechanicalModel":
+        """The same symbolic model (derivations and compiled code shared) with other numeric parameter values,
+        initial values (``name``) or initial rates (``der(name)``): what a sweep worker reuses between tasks."""
+        import copy
+        import re
+
+        doc = copy.copy(self.doc)
+        doc.parameter_exprs = dict(doc.parameter_exprs)
+        doc.initial = dict(doc.initial)
+        doc.initial_rate = dict(doc.initial_rate)
+        for key, value in values.items():
+            m = re.fullmatch(r"der\((\w+)\)", key)
+            if m and m.group(1) in doc.initial_rate:
+                doc.initial_rate[m.group(1)] = float(value)
+            elif key in doc.parameter_exprs:
+                doc.parameter_exprs[key] = sp.Float(float(value))
+            elif key in doc.initial:
+                doc.initial[key] = float(value)
+            else:
+                from mechsys.errors import InputError
+
+                raise InputError(f"unknown parameter or coordinate {key!r}{doc.suggest(key, list(doc.parameters) + list(doc.initial))}")
+        values_now: dict = {}
+        doc.parameter_values = {}
+        for name, expr in doc.parameter_exprs.items():
+            val = float(expr.xreplace(values_now).evalf())
+            values_now[doc.parameters[name]] = sp.Float(val)
+            doc.parameter_values[name] = val
+        clone = copy.copy(self)
+        clone.doc = doc
+        return clone
+
     # ------------------------------------------------------------------------------------- basics
     @property
     def parameters(self) -> dict[str, float]:
