@@ -489,6 +489,40 @@ def export_result(
 
 
 @app.command()
+def check(
+    paths: List[Path] = typer.Argument(..., help="Model files or directories (searched recursively)."),
+    jobs: Optional[int] = typer.Option(None, "--jobs", "-j", help="Local worker processes (default: all cores)."),
+    junit: Optional[Path] = typer.Option(None, "--junit", help="Write a JUnit XML report."),
+    markdown: Optional[Path] = typer.Option(None, "--markdown", help="Write a Markdown report."),
+    fmt: TableFormat = typer.Option(TableFormat.text, "--format", "-f", help="Format of the summary on stdout."),
+) -> None:
+    """Run the expectations (`expect:` or FILE.check.yaml) of model files; exit 0 only if all pass."""
+
+    def body() -> int:
+        from mechsys.analysis.check import junit_xml, run_checks
+        from mechsys.report.tables import Table, render_tables
+
+        results = run_checks([str(p) for p in paths], jobs)
+        table = Table("checks", ["file", "check", "status", "measured", "expected", "message"])
+        for r in results:
+            table.add(os.path.relpath(r["file"]) if not r["file"].startswith("..") else r["file"], r["name"], r["status"].upper(), r["measured"], r["expected"], r["message"])
+        passed = sum(r["status"] == "pass" for r in results)
+        failed = sum(r["status"] == "fail" for r in results)
+        errors = sum(r["status"] == "error" for r in results)
+        table.notes.append(f"{passed} passed, {failed} failed, {errors} errors")
+        if not results:
+            table.notes.append("no expectations found")
+        if junit is not None:
+            write_atomic(junit, junit_xml(results))
+        if markdown is not None:
+            write_atomic(markdown, render_tables([table], "markdown"))
+        emit_tables([table], fmt, None, {"results": results, "passed": passed, "failed": failed, "errors": errors})
+        return 0 if failed == 0 and errors == 0 else 1
+
+    run(body)
+
+
+@app.command()
 def schema(output: Optional[Path] = OutputOption) -> None:
     """Print the JSON Schema of the model language (for editor completion)."""
 

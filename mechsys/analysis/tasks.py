@@ -65,7 +65,39 @@ def _simulate(model: MechanicalModel, options: dict) -> Outputs:
     return out
 
 
+def _bifurcations(model: MechanicalModel, options: dict) -> Outputs:
+    from mechsys.analysis.bifurcation import sweep
+
+    res = sweep(model, str(options["parameter"]), float(options["start"]), float(options["stop"]),
+                int(options.get("points", 61)))
+    out: Outputs = {"count": len(res.bifurcations)}
+    counters: dict[str, int] = {}
+    for b in res.bifurcations:
+        counters[b["kind"]] = counters.get(b["kind"], 0) + 1
+        key = f"{b['kind']}{counters[b['kind']]}"
+        out[f"{key}.value"] = b["value"]
+        for name, v in b["coordinates"].items():
+            out[f"{key}.{name}"] = v
+    out.update({f"{k}_count": v for k, v in counters.items()})
+    return out
+
+
+def _derive(model: MechanicalModel, options: dict) -> Outputs:
+    """The equations as sympy objects (not scalars): M[i,j], f[i], T, V, Q[i], for expression checks."""
+    eq = model.equations(str(options.get("method", "lagrange")))
+    out: Outputs = {"T": eq.T, "V": eq.V}
+    n = len(eq.q)
+    for i in range(n):
+        out[f"f[{i + 1}]"] = eq.f[i]
+        out[f"Q[{i + 1}]"] = eq.Q[i]
+        for j in range(n):
+            out[f"M[{i + 1},{j + 1}]"] = eq.M[i, j]
+    return out
+
+
 ANALYSES: dict[str, Callable[[MechanicalModel, dict], Outputs]] = {
+    "derive": _derive,
+    "bifurcations": _bifurcations,
     "info": _info,
     "equilibria": _equilibria,
     "modes": _modes,

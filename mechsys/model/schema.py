@@ -325,6 +325,26 @@ class Event(Strict):
     action: Literal["record", "stop"] = "record"
 
 
+# ----------------------------------------------------------------------------------------- expectations
+class Expectation(Strict):
+    """An expected analysis result with its tolerance, checked by `mechsys check`."""
+
+    name: str = Field(description="what the check is called in reports")
+    analysis: Literal["info", "derive", "equilibria", "modes", "simulate", "bifurcations"]
+    set: dict[str, Union[int, float, str]] = Field(default_factory=dict, description="overrides, like --set")
+    options: dict[str, Union[int, float, str, bool]] = Field(default_factory=dict,
+                                                             description="analysis options, e.g. t_end")
+    output: str | None = Field(None, description="an output of the analysis, e.g. dof, eq2.beta, final.beta")
+    equilibrium: dict[str, float] | None = Field(None, description="equilibria: some equilibrium has these values")
+    stability: str | None = Field(None, description="with 'equilibrium': its expected verdict")
+    expression: str | None = Field(None, description="derive: the expected expression of 'output' (e.g. M[1,1])")
+    value: Union[int, float, str, bool, None] = None
+    tolerance: float = Field(0.0, ge=0, description="absolute tolerance on 'value'")
+    rel_tolerance: float = Field(0.0, ge=0, description="relative tolerance on 'value'")
+    min: float | None = None
+    max: float | None = None
+
+
 # ----------------------------------------------------------------------------------------- the file
 class System(Strict):
     """A mechanical system: the root of a mechsys YAML file."""
@@ -338,6 +358,7 @@ class System(Strict):
     constraints: list[Constraint] = Field(default_factory=list)
     forces: list[ForceSpec] = Field(default_factory=list)
     events: list[Event] = Field(default_factory=list)
+    expect: list[Expectation] = Field(default_factory=list)
 
     @field_validator("coordinates", mode="before")
     @classmethod
