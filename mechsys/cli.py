@@ -262,10 +262,13 @@ def equilibria(
 
             if linearize_ and not numeric:
                 tables += rep.symbolic_tables(symbolic_matrices(model), model.coordinates)
+            reduced = bool(result.cyclic) or bool(model.kin.constraints)
             for k, e in enumerate(result.equilibria, start=1):
                 lin = linearize(model, e)
                 label = f"equilibrium {k}"
-                tables += rep.linearization_tables(lin, label, hurwitz) if linearize_ else rep.hurwitz_tables(lin, label)
+                J = e.jacobian if reduced else None
+                tables += (rep.linearization_tables(lin, label, hurwitz, J) if linearize_
+                           else rep.hurwitz_tables(lin, label, J))
         payload = rep.equilibria_payload(result, bifurcations)
         if sweep_spec and fmt == TableFormat.csv:
             branch_table = [t for t in tables if t.title.startswith("branches")]

@@ -54,6 +54,8 @@ def sweep(model: MechanicalModel, name: str, start: float, stop: float, points: 
           search: dict | None = None) -> SweepResult:
     """Follow every equilibrium branch found at the ends and the middle of [start, stop] by pseudo-arclength
     continuation; stability from the eigenvalues; folds, branch points and Hopf points located on the way."""
+    if start == stop:
+        raise InputError(f"--sweep {name}: START and STOP must differ")
     problem = EquilibriumProblem(model)
     sens = parameter_sensitivity(model, name)
     lo, hi = min(start, stop), max(start, stop)
@@ -142,7 +144,9 @@ def plot_sweep(result: SweepResult, path: str, coordinate: str | None = None) ->
 
     if not result.names:
         raise InputError("nothing to plot: the system has no free coordinates")
-    k = result.names.index(coordinate) if coordinate in result.names else 0
+    if coordinate is not None and coordinate not in result.names:
+        raise InputError(f"--plot-coordinate {coordinate}: choose from {', '.join(result.names)}")
+    k = result.names.index(coordinate) if coordinate is not None else 0
     fig, ax = plt.subplots(figsize=(7, 4.5))
     for b, branch in enumerate(result.branches):
         ps = np.array([pt.p for pt in branch.points])
@@ -150,11 +154,13 @@ def plot_sweep(result: SweepResult, path: str, coordinate: str | None = None) ->
         if result.angles[k]:
             ys = np.array([wrap(y) for y in ys])
         stable = np.array([pt.stable for pt in branch.points])
-        for i in range(len(ps) - 1):
-            if result.angles[k] and abs(ys[i + 1] - ys[i]) > np.pi:
-                continue
-            style = "-" if stable[i] and stable[i + 1] else "--"
-            ax.plot(ps[i:i + 2], ys[i:i + 2], style, color=f"C{b % 10}", lw=1.8)
+        start = 0
+        for i in range(1, len(ps) + 1):  # one line per run of equal stability (so dashes show)
+            jump = i < len(ps) and result.angles[k] and abs(ys[i] - ys[i - 1]) > np.pi
+            if i == len(ps) or stable[i] != stable[start] or jump:
+                end = i if jump or i == len(ps) else i + 1
+                ax.plot(ps[start:end], ys[start:end], "-" if stable[start] else "--", color=f"C{b % 10}", lw=1.8)
+                start = i
     for bif in result.bifurcations:
         y = list(bif["coordinates"].values())[k] if bif["coordinates"] else 0.0
         ax.plot([bif["value"]], [y], "o", color="k", ms=5)

@@ -358,9 +358,24 @@ def find_equilibria(model: MechanicalModel, search: dict[str, tuple[float, float
     problem = EquilibriumProblem(model)
     p = parameter_values(model)
     roots = solve_equilibria(problem, p, search, starts, seed)
-    equilibria = [problem.equilibrium(z) for z in roots]
+    message = ""
+    isolated = []
+    family = None
+    for z in roots:
+        J = problem.J(z, p)
+        sv = np.linalg.svd(J, compute_uv=False) if J.size else np.zeros(0)
+        if sv.size and sv[-1] <= 1e-9 * max(1.0, sv[0]):
+            family = family if family is not None else z  # not isolated: one representative of the continuum
+        else:
+            isolated.append(z)
+    if family is not None:
+        isolated.append(family)
+        message = ("the equilibria are not isolated (singular Jacobian: e.g. a free rigid-body motion); "
+                   "one representative of the continuum is shown")
+    equilibria = [problem.equilibrium(z) for z in isolated]
     for e in equilibria:
         assess(problem, e, p)
     equilibria.sort(key=lambda e: tuple(e.coordinates.values()) + tuple(e.rates.values()))
-    message = "" if equilibria else "no equilibrium in the search box (the equilibrium conditions have no solution there)"
+    if not equilibria:
+        message = "no equilibrium found in the search box (multistart search; widen it with --search)"
     return EquilibriaResult(equilibria, message, problem.cyclic, dict(problem.fixed_rates))

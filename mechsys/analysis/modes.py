@@ -42,6 +42,7 @@ class Modes:
                       for k, (w, z, r) in enumerate(zip(self.frequencies, self.damping_ratios, self.rigid_body))],
             "eigenvalues": [[float(v.real), float(v.imag)] for v in self.eigenvalues],
             "condensed": self.condensed,
+            "unstable_modes": self.unstable_modes,
         }
 
 
@@ -56,15 +57,16 @@ class ReducedSystem:
     names: list[str]
 
     def receptance(self, omega: float, lin: Linearization) -> np.ndarray:
-        """H(omega) = (K - omega^2 M + i omega C)^-1 on the full coordinates (massless ones included)."""
-        Z = (lin.K + lin.N) - omega**2 * lin.M + 1j * omega * (lin.C + lin.G)
-        return np.linalg.inv(Z)
+        """H(omega) = T (K - omega^2 M + i omega C)^-1 T^T on the full coordinates: the reduced (constrained,
+        condensed) system, mapped back."""
+        Z = self.K - omega**2 * self.M + 1j * omega * self.C
+        return self.T @ np.linalg.solve(Z, self.T.T)
 
     def state_space(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         n = self.M.shape[0]
         Minv = np.linalg.inv(self.M)
         A = np.block([[np.zeros((n, n)), np.eye(n)], [-Minv @ self.K, -Minv @ self.C]])
-        B = np.vstack([np.zeros((n, n)), Minv @ self.T.T])
+        B = np.vstack([np.zeros((n, self.T.shape[0])), Minv @ self.T.T])
         Cout = np.hstack([self.T, np.zeros((self.T.shape[0], n))])
         return A, B, Cout, np.zeros((self.T.shape[0], self.T.shape[0]))
 
@@ -148,16 +150,15 @@ def vibration_modes(model: MechanicalModel, at: dict[str, float] | None = None) 
     vals = sla.eigvals(A, B)
     vals = vals[np.isfinite(vals)]
     vals = vals[np.lexsort((vals.imag, np.abs(vals)))]
+    # modal damping ratios zeta_k = phi_k^T C phi_k / (2 omega_k) with mass-normalised phi (exact for
+    # proportional damping; the damped eigenvalues are reported as well)
+    Csym = (red.C + red.C.T) / 2
     zeta = np.zeros(len(freqs))
-    pool = [v for v in vals if v.imag >= -1e-12 * max(1.0, abs(v))]
     for k, w in enumerate(freqs):
-        if rigid[k] or not pool:
-            continue
-        j = int(np.argmin([abs(abs(v) - w) for v in pool]))
-        v = pool.pop(j)
-        zeta[k] = -v.real / abs(v) if abs(v) > 0 else 0.0
-        if abs(zeta[k]) < 1e-12:
-            zeta[k] = 0.0
+        if w > 0 and not rigid[k]:
+            zeta[k] = float(phi[:, k] @ Csym @ phi[:, k]) / (2 * w)
+            if abs(zeta[k]) < 1e-12:
+                zeta[k] = 0.0
     names = list(lin.coordinates)
     return Modes(names, e, freqs, shapes, rigid, zeta, vals, condensed, unstable, red)
 
@@ -170,7 +171,11 @@ def frf(model: MechanicalModel, modes: Modes, omegas: np.ndarray, inp: str, out:
         if name not in names:
             raise InputError(f"unknown coordinate {name!r} for --frf (choose from {', '.join(names)})")
     i, o = names.index(inp), names.index(out)
-    return np.array([modes.system.receptance(w, lin)[o, i] for w in omegas])
+    try:
+        return np.array([modes.system.receptance(w, lin)[o, i] for w in omegas])
+    except np.linalg.LinAlgError:
+        raise AnalysisError("the dynamic stiffness is singular at some frequency (an undamped resonance or a "
+                            "rigid-body mode at omega = 0): move the frequency grid") from None
 
 
 def transfer_function(modes: Modes, inp: str, out: str) -> tuple[np.ndarray, np.ndarray]:

@@ -101,7 +101,12 @@ def _conservative_linear(problem, e, p, vals, tol, stability, reason) -> tuple[s
             return stability, reason
     if np.max(np.abs(vals.real)) > tol:
         return stability, reason
-    osc = sorted(abs(v.imag) for v in vals if abs(v.imag) > tol)
+    # a zero eigenvalue of a Jordan block (rigid-body drift) splits numerically into +-sqrt(eps)-sized pairs
+    tiny = 1e-6 * max(1.0, float(np.max(np.abs(vals))))
+    zeros = int(np.sum(np.abs(vals) <= tiny))
+    if zeros > len(getattr(problem, "fixed_rates", {})):
+        return stability, reason  # a zero eigenvalue that is not a family of steady motions: drift is possible
+    osc = sorted(abs(v.imag) for v in vals if abs(v.imag) > tiny)
     if any(abs(a - b) <= 1e-7 * max(1.0, a) for a, b in zip(osc[::2][1:], osc[::2][:-1])):
         return stability, reason  # repeated frequencies: possible resonance, secular growth
     return "stable", reason.split(";")[0] + "; conservative system with a purely oscillatory, simple spectrum " \
@@ -129,7 +134,7 @@ def energy_verdict(problem, e, p: np.ndarray, zero_count: int) -> tuple[str, str
     htol = ZERO_H * max(1.0, float(np.max(np.abs(h)))) if h.size else 0.0
     if h.size == 0 or np.min(h) > htol:
         return "stable", prefix + "energy argument: strict minimum of the effective potential and no energy input " \
-                                  "(Lagrange-Dirichlet), so stable but not asymptotically"
+                                  "(Lagrange-Dirichlet): stable; asymptotic stability is not decided by this test"
     if np.min(h) < -htol:
         if complete:
             return "unstable", prefix + "the effective potential has no minimum and the damping is complete " \
@@ -137,7 +142,7 @@ def energy_verdict(problem, e, p: np.ndarray, zero_count: int) -> tuple[str, str
         return "undecided", prefix + "the effective potential has no minimum; without complete damping " \
                                      "gyroscopic forces may still stabilize"
     null = np.linalg.eigh((H + H.T) / 2)[1][:, np.abs(h) <= htol]
-    if null.shape[1] == 1 and not problem.m:
+    if null.shape[1] == 1 and not problem.m and len(qn) == 1:  # along a line is a proof only in one dimension
         order, value = _higher_order(U, qn, problem, q0, p, null[:, 0])
         if order and order % 2 == 0 and value > 0:
             return "stable", prefix + f"energy argument: the effective potential has a strict minimum (order-{order} " \

@@ -56,7 +56,8 @@ def matrix_table(title: str, names: list[str], matrix: np.ndarray, row_names: li
     return t
 
 
-def linearization_tables(lin: Linearization, label: str, hurwitz: bool) -> list[Table]:
+def linearization_tables(lin: Linearization, label: str, hurwitz: bool,
+                         reduced_jacobian: np.ndarray | None = None) -> list[Table]:
     names = lin.coordinates
     tables = [matrix_table(f"{label}: {key}", names, getattr(lin, key)) for key in ("M", "C", "G", "K", "N")]
     if np.linalg.cond(lin.M) < 1e12:
@@ -64,22 +65,39 @@ def linearization_tables(lin: Linearization, label: str, hurwitz: bool) -> list[
         tables.append(matrix_table(f"{label}: A (state {', '.join(states)})", states, lin.A))
         tables.append(matrix_table(f"{label}: B (generalized forces)", names, lin.B, states))
     if hurwitz:
-        tables += hurwitz_tables(lin, label)
+        tables += hurwitz_tables(lin, label, reduced_jacobian)
     return tables
 
 
-def hurwitz_tables(lin: Linearization, label: str) -> list[Table]:
+def hurwitz_tables(lin: Linearization, label: str, reduced_jacobian: np.ndarray | None = None) -> list[Table]:
+    """With cyclic coordinates or constraints the polynomial of the reduced state Jacobian (monic) is the one
+    stability is about; otherwise det(M s^2 + (C+G) s + K + N) as the book writes it."""
+    if reduced_jacobian is not None:
+        from mechsys.analysis.linearize import hurwitz_determinants
+
+        coeffs = np.real(np.poly(reduced_jacobian))
+        n = len(coeffs) - 1
+        poly = Table(f"{label}: characteristic polynomial of the reduced state Jacobian (monic)",
+                     ["power of s", "coefficient"])
+        for k, c in enumerate(coeffs):
+            poly.add(n - k, float(c))
+        dets = hurwitz_determinants(coeffs)
+        return [poly, _hurwitz_conditions(label, coeffs, dets)]
     coeffs = lin.characteristic_polynomial()
     n = len(coeffs) - 1
     poly = Table(f"{label}: characteristic polynomial det(M s^2 + (C+G) s + K + N)", ["power of s", "coefficient"])
     for k, c in enumerate(coeffs):
         poly.add(n - k, float(c))
     dets = lin.hurwitz_determinants()
+    return [poly, _hurwitz_conditions(label, coeffs, dets)]
+
+
+def _hurwitz_conditions(label: str, coeffs, dets) -> Table:
     hur = Table(f"{label}: Routh-Hurwitz conditions (all > 0 <=> asymptotically stable)", ["condition", "value", "holds"])
     hur.add("all coefficients > 0", min(float(c) for c in coeffs), bool(all(c > 0 for c in coeffs)))
     for k, d in enumerate(dets, start=1):
         hur.add(f"Delta_{k} > 0", d, bool(d > 0))
-    return [poly, hur]
+    return hur
 
 
 def symbolic_tables(mats: dict, names: list[str]) -> list[Table]:

@@ -81,15 +81,18 @@ def to_rich(tables: list[Table]):
     from rich.console import Group
     from rich.table import Table as RichTable
 
+    from rich.markup import escape
+    from rich.text import Text
+
     parts = []
     for t in tables:
-        rt = RichTable(title=t.title)
+        rt = RichTable(title=escape(t.title))
         for c in t.columns:
-            rt.add_column(c)
+            rt.add_column(escape(c))
         for row in t.rows:
-            rt.add_row(*[_cell(c) for c in row])
+            rt.add_row(*[Text(_cell(c)) for c in row])
         parts.append(rt)
-        parts += [f"  {n}" for n in t.notes]
+        parts += [Text(f"  {n}") for n in t.notes]
     return Group(*parts)
 
 
