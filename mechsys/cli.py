@@ -492,6 +492,53 @@ def export_result(
 
 
 @app.command()
+def collide(
+    file: Path = typer.Argument(..., help="Model file (YAML) with 'contacts'."),
+    impact: Optional[str] = typer.Option(None, "--impact", help="Contact to resolve (default: every approaching one)."),
+    percussion: bool = typer.Option(False, "--percussion", help="Report the centre of percussion of a hinged link."),
+    link: Optional[str] = typer.Option(None, "--link", help="With --percussion: the hinged link."),
+    fmt: TableFormat = typer.Option(TableFormat.text, "--format", "-f", help="Output format."),
+    set_: Optional[List[str]] = SetOption,
+    output: Optional[Path] = OutputOption,
+) -> None:
+    """Resolve an impact at the file's state: velocities of separation, contact and joint impulses, energy lost."""
+
+    def body() -> int:
+        import mechsys
+        from mechsys.analysis.collide import centre_of_percussion, resolve
+        from mechsys.model.load import parse_assignments
+        from mechsys.report.tables import Table
+
+        model = mechsys.load(file, parse_assignments(set_), release_prescribed=True)
+        if percussion:
+            cp = centre_of_percussion(model, link)
+            t = Table(f"centre of percussion of {cp['link']}", ["quantity", "value"])
+            t.add("I_O (about the hinge axis)", cp["I_O"])
+            t.add("r_G (axis to centre of mass)", cp["r_G"])
+            t.add("r_C = I_O/(m r_G)", cp["distance"])
+            t.add("point (link axes)", ", ".join(f"{x:.10g}" for x in cp["point_in_link_axes"]))
+            emit_tables([t], fmt, output, cp)
+            return 0
+        result = resolve(model, impact)
+        rates = Table("velocities", ["coordinate", "before", "after"])
+        for c, a, b in zip(result.coordinates, result.rates_before, result.rates_after):
+            rates.add(f"der({c})", float(a), float(b))
+        contacts = Table("contacts", ["contact", "normal velocity before", "after", "impulse"])
+        for k, name in enumerate(result.contacts):
+            contacts.add(name, float(result.normal_velocity_before[k]), float(result.normal_velocity_after[k]),
+                         float(result.impulses[k]))
+        joints = Table("joint impulses on each link from its parent (ground axes)", ["link", "x", "y", "z"])
+        for name, vec in result.joint_impulses.items():
+            joints.add(name, *vec)
+        energy = Table("kinetic energy", ["before", "after", "lost"])
+        energy.add(result.energy_before, result.energy_after, result.energy_loss)
+        emit_tables([rates, contacts, joints, energy], fmt, output, result.to_dict())
+        return 0
+
+    run(body)
+
+
+@app.command()
 def check(
     paths: List[Path] = typer.Argument(..., help="Model files or directories (searched recursively)."),
     jobs: Optional[int] = typer.Option(None, "--jobs", "-j", help="Local worker processes (default: all cores)."),
@@ -521,6 +568,110 @@ def check(
             write_atomic(markdown, render_tables([table], "markdown"))
         emit_tables([table], fmt, None, {"results": results, "passed": passed, "failed": failed, "errors": errors})
         return 0 if failed == 0 and errors == 0 else 1
+
+    run(body)
+
+
+@app.command()
+def sweep(
+    file: Path = typer.Argument(..., help="Model file (YAML)."),
+    param: Optional[List[str]] = typer.Option(
+        None, "--param", "-p", metavar="NAME=START:STOP:N",
+        help="Swept input: a parameter, a coordinate's initial value or der(NAME) its initial rate; N points from "
+             "START to STOP. Repeatable (Cartesian grid). With --sample: NAME=LO:HI is the box."),
+    run_: str = typer.Option(..., "--run", "-r", help="Analysis of each task: equilibria, simulate, modes or info."),
+    sample: Optional[str] = typer.Option(None, "--sample", metavar="latin:N|random:N",
+                                         help="N points drawn inside the --param boxes instead of the grid."),
+    seed: int = typer.Option(0, "--seed", help="Seed of --sample."),
+    option: Optional[List[str]] = typer.Option(
+        None, "--option", metavar="KEY=VALUE",
+        help="Analysis option (simulate: t_end, dt, method; equilibria: search.NAME=LO:HI; modes: at.NAME=VALUE). "
+             "Repeatable."),
+    executor: str = typer.Option("processes", "--executor", "-e", help="processes (local) or dask."),
+    jobs: Optional[int] = typer.Option(None, "--jobs", "-j", help="Worker processes (default: the CPU count)."),
+    scheduler: Optional[str] = typer.Option(None, "--scheduler", metavar="ADDRESS",
+                                            help="With --executor dask: an existing scheduler (tcp://host:8786); "
+                                                 "default: a local cluster of --jobs workers."),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar."),
+    fmt: TableFormat = typer.Option(TableFormat.text, "--format", "-f", help="Format of the summary."),
+    set_: Optional[List[str]] = SetOption,
+    output: Optional[Path] = typer.Option(
+        None, "--output", "-o",
+        help="Tidy table (.csv or .parquet), written atomically as tasks finish; an existing one is resumed. "
+             "Default: CSV on stdout (summary on stderr)."),
+) -> None:
+    """Run one analysis over a grid or a sample of parameters and initial values: one tidy table, resumable,
+    on local processes or a Dask cluster. Exit 1 only when every task failed."""
+
+    def body() -> int:
+        import difflib
+
+        import mechsys
+        from mechsys.analysis import sweep as sw
+        from mechsys.analysis.tasks import ANALYSES
+        from mechsys.model.load import parse_assignments
+        from mechsys.report.tables import Table, render_tables
+
+        analysis = run_.strip()
+        if analysis not in ANALYSES:
+            if analysis == "collide":
+                raise InputError("--run collide: not available yet (collide issue)")
+            close = difflib.get_close_matches(analysis, list(ANALYSES), n=1)
+            hint = f" (did you mean {close[0]!r}?)" if close else ""
+            raise InputError(f"--run {analysis!r}: unknown analysis{hint} (choose from {', '.join(ANALYSES)})")
+        if executor not in sw.EXECUTORS:
+            raise InputError(f"--executor {executor!r}: choose from {', '.join(sw.EXECUTORS)}")
+        if scheduler and executor != "dask":
+            raise InputError("--scheduler needs --executor dask")
+        if jobs is not None and jobs < 1:
+            raise InputError(f"--jobs {jobs}: must be at least 1")
+        sampling = sw.parse_sample(sample)
+        axes = sw.parse_params(param, sampled=sampling is not None)
+        options = sw.parse_options(option, analysis)
+        sw.check_output(output)
+        sets = parse_assignments(set_)
+        model = mechsys.load(file, sets, release_prescribed=analysis == "simulate")
+        sw.check_names(model, axes)
+        names = [a.name for a in axes]
+        tasks = sw.make_tasks(axes, sampling, seed)
+        resume = sw.load_resume(output, names, model)
+        spec = sw.SweepSpec(str(file.resolve()), file.read_text(encoding="utf-8"), tuple(sets.items()), analysis,
+                            options)
+
+        from rich.console import Console
+        from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn,
+                                   TimeRemainingColumn)
+
+        err = Console(stderr=True)
+        bar = Progress(TextColumn(f"sweep {analysis}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+                       TimeRemainingColumn(), console=err, disable=quiet or not err.is_terminal, transient=True)
+        with bar:
+            job = bar.add_task("sweep", total=None)
+            table, summary = sw.sweep(spec, names, tasks, resume, output, executor, jobs, scheduler,
+                                      lambda k, total: bar.update(job, total=total, advance=k))
+        if output is None:
+            sys.stdout.write(sw.table_csv(table))
+        t = Table("sweep summary", ["", "value"])
+        for label, value in (("tasks", summary.tasks), ("done", summary.done), ("failed", summary.failed),
+                             ("skipped (finished before)", summary.skipped), ("kept (other tasks in the file)",
+                                                                             summary.kept),
+                             ("executor", f"{summary.executor} ({summary.workers} workers)"),
+                             ("wall time [s]", round(summary.seconds, 3)), ("output", summary.output or "stdout")):
+            t.add(label, value)
+        t.notes += summary.errors
+        rendered = render_tables([t], fmt.value, {**summary.to_dict(), "errors": summary.errors})
+        if output is None:
+            err.print(rendered) if not isinstance(rendered, str) else sys.stderr.write(rendered)
+        elif isinstance(rendered, str):
+            sys.stdout.write(rendered)
+        else:
+            Console().print(rendered)
+        if summary.tasks and summary.done + summary.skipped == 0:
+            sys.stderr.write("mechsys: every task failed (see the error column)\n")
+            return 1
+        if summary.failed:
+            sys.stderr.write(f"mechsys: {summary.failed} of {summary.tasks} tasks failed (see the error column)\n")
+        return 0
 
     run(body)
 

@@ -67,6 +67,7 @@ class Kinematics:
     loads: list[Load] = field(default_factory=list)
     constraints: list[ConstraintRow] = field(default_factory=list)
     constraint_elements: list[tuple[str, int]] = field(default_factory=list)  # (type, NCE)
+    contacts: list[dict] = field(default_factory=list)
     angles: dict[str, bool] = field(default_factory=dict)
 
 
@@ -172,6 +173,7 @@ class Builder:
         self.build_bodies()
         self.build_constraints()
         self.build_loads()
+        self.build_contacts()
         return self.kin
 
     def link_order(self) -> list[str]:
@@ -431,6 +433,43 @@ class Builder:
         v_surf = surface.home_R * surface.v + surface.omega_ground.cross(contact - surface.origin)
         slip = v_link - v_surf
         return [ConstraintRow(f"{name}.{ax}", "nonholonomic", None, slip["xyz".index(ax)]) for ax in c.components]
+
+    # ------------------------------------------------------------------------------------- contacts
+    def build_contacts(self) -> None:
+        """Each contact: its normal relative velocity vn (linear in the rates; < 0 approaching), the gap (when
+        given), the restitution law e(vn), and where the impulse acts (for joint impulses)."""
+        vn_symbol = sp.Symbol("vn", real=True)
+        names = set()
+        for i, c in enumerate(self.doc.spec.contacts):
+            cp: Path = ("contacts", i)
+            if c.name in names:
+                raise self.doc.error(cp + ("name",), f"duplicate contact name {c.name!r}")
+            names.add(c.name)
+            e = self.doc.parse(c.restitution, cp + ("restitution",), "parameter", extra={"vn": vn_symbol})
+            entry = {"name": c.name, "restitution": e, "vn_symbol": vn_symbol, "points": []}
+            if (c.between is None) == (c.gap is None):
+                raise self.doc.error(cp, "give either 'between' (with 'normal') or 'gap'")
+            if c.gap is not None:
+                gap = self.doc.parse(c.gap, cp + ("gap",))
+                if not (gap.free_symbols & set(self.doc.coords.values())):
+                    raise self.doc.error(cp + ("gap",), "the gap does not depend on any free coordinate")
+                entry.update(gap=gap, vn=self.rate_of(gap))
+            else:
+                if c.normal is None:
+                    raise self.doc.error(cp, "a contact 'between' two points needs a 'normal'")
+                n = self.frame(c.frame, cp + ("frame",)).R * self.axis(c.normal, cp + ("normal",))
+                velocities = []
+                for k, ref in enumerate(c.between):
+                    frame, local = self.point_on(ref, cp + ("between", k))
+                    rate = self.rate_of(local)
+                    v_home = frame.point_velocity(local) + (frame.R * rate if frame.pure else rate)
+                    velocities.append(frame.home_R * v_home)
+                    entry["points"].append((ref.partition(".")[0], frame.point(local), 1 if k == 0 else -1))
+                vn = n.dot(velocities[0] - velocities[1])
+                if _identically_zero(vn, self.doc):
+                    raise self.doc.error(cp, "the contact points cannot approach each other along the normal")
+                entry.update(gap=None, vn=vn, normal=n)
+            self.kin.contacts.append(entry)
 
     # ------------------------------------------------------------------------------------- loads
     def build_loads(self) -> None:

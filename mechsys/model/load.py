@@ -55,7 +55,7 @@ class Document:
         return InputError(message, self.file, line, col, dotted(path))
 
     # ------------------------------------------------------------------------------------- parsing
-    def parse(self, value: Any, path: Path, kind: str = "kinematic") -> sp.Expr:
+    def parse(self, value: Any, path: Path, kind: str = "kinematic", extra: dict | None = None) -> sp.Expr:
         """Parse an expression at ``path``. ``kind``: 'parameter' (parameters only), 'initial' (parameters),
         'prescribed' (parameters and t), 'kinematic' (+ coordinates), 'force' (+ rates)."""
         symbols: dict[str, sp.Expr] = dict(self.parameters)
@@ -68,6 +68,7 @@ class Document:
         if kind == "force":
             rates = dict(self.rates)
             rates.update({n: sp.diff(e, T) for n, e in self.prescribed.items()})
+        symbols.update(extra or {})
         try:
             return parse_expression(value, symbols, rates)
         except ExpressionError as exc:

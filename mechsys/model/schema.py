@@ -325,6 +325,20 @@ class Event(Strict):
     action: Literal["record", "stop"] = "record"
 
 
+# ----------------------------------------------------------------------------------------- contacts
+class Contact(Strict):
+    """A contact pair for impacts: two points and a normal, or a gap function (gap >= 0 means separated)."""
+
+    name: Name
+    between: Annotated[list[PointRef], Field(min_length=2, max_length=2)] | None = Field(
+        None, description="two points; the first is pushed along +normal, the second along -normal")
+    normal: Axis | None = Field(None, description="contact normal (with 'between'), in 'frame' axes")
+    frame: str = "ground"
+    gap: Expr | None = Field(None, description="gap function of the coordinates (>= 0 separated); its gradient "
+                                                "gives the normal direction in coordinate space")
+    restitution: Expr = Field(1, description="Newton's coefficient e (may depend on the approach speed 'vn')")
+
+
 # ----------------------------------------------------------------------------------------- expectations
 class Expectation(Strict):
     """An expected analysis result with its tolerance, checked by `mechsys check`."""
@@ -358,6 +372,7 @@ class System(Strict):
     constraints: list[Constraint] = Field(default_factory=list)
     forces: list[ForceSpec] = Field(default_factory=list)
     events: list[Event] = Field(default_factory=list)
+    contacts: list[Contact] = Field(default_factory=list)
     expect: list[Expectation] = Field(default_factory=list)
 
     @field_validator("coordinates", mode="before")
