@@ -379,6 +379,9 @@ def simulate(
     output: Optional[Path] = typer.Option(None, "--output", "-o", help="Result file: .csv or .json (atomic)."),
     plot: Optional[Path] = typer.Option(None, "--plot", help="Time histories, phase portrait, energy (.png/.svg)."),
     events_file: Optional[Path] = typer.Option(None, "--events", help="Write the recorded events (.csv or .json)."),
+    impacts_file: Optional[Path] = typer.Option(None, "--impacts", help="Write the impact table (.csv or .json)."),
+    capture: float = typer.Option(1e-10, "--capture-velocity",
+                                  help="Rest rule: slower impacts are plastic and the contact stays closed."),
     fmt: TableFormat = typer.Option(TableFormat.text, "--format", "-f", help="Format of the summary."),
     set_: Optional[List[str]] = SetOption,
 ) -> None:
@@ -398,13 +401,17 @@ def simulate(
 
         # prescribed coordinates are released into drive constraints so their driving forces are outputs
         model = mechsys.load(file, parse_assignments(set_), release_prescribed=True)
-        result = run_simulation(model, t_end, dt, method, rtol, atol)
+        result = run_simulation(model, t_end, dt, method, rtol, atol, capture_velocity=capture)
         result.timings = {"load": _time.perf_counter() - t0 - sum(result.timings.values()), **result.timings}
         names, data = result.columns()
         if output is not None:
             write_atomic(output, result_text(names, data, output.suffix))
         if plot is not None:
             plot_histories(names, data, str(plot))
+        if impacts_file is not None:
+            from mechsys.report.simulation import impacts_text
+
+            write_atomic(impacts_file, impacts_text(result.impacts, result.coordinates, impacts_file.suffix))
         if events_file is not None:
             from mechsys.report.simulation import events_text
 

@@ -64,7 +64,7 @@ class ImpactModel:
 
 
 def resolve(model: MechanicalModel, contact: str | None = None, q: np.ndarray | None = None,
-            u: np.ndarray | None = None, t: float = 0.0) -> ImpactResult:
+            u: np.ndarray | None = None, t: float = 0.0, only: list[str] | None = None) -> ImpactResult:
     """Resolve one impact at the state (q, u) (default: the file's initial state). All approaching contacts (or
     just ``contact``) are solved together: U >= 0 with v+ + e v- >= 0, complementary (an active-set search)."""
     im = model.__dict__.get("_impact_model") or ImpactModel(model)
@@ -78,7 +78,8 @@ def resolve(model: MechanicalModel, contact: str | None = None, q: np.ndarray | 
     M, J, A = im.M(t, q, u, p), im.J(t, q, u, p), im.A(t, q, u, p)
     vt = im.vn_t(t, q, u, p).ravel()
     v_before = J @ u + vt
-    candidates = [k for k, name in enumerate(im.names) if (contact is None or name == contact)]
+    candidates = [k for k, name in enumerate(im.names) if (contact is None or name == contact)
+                  and (only is None or name in only)]
     approaching = [k for k in candidates if v_before[k] < 0]
     if not approaching:
         raise AnalysisError("no contact is approaching (normal velocity >= 0): there is no impact to resolve")

@@ -33,6 +33,26 @@ class Compiled:
     seconds: float
     cache_hit: bool = False
     events: object = None
+    gaps: object = None  # gap functions of the contacts that have one
+    gap_A: object = None  # their normal-velocity Jacobians (persistent-contact rows)
+    gap_b: object = None
+    gap_names: list = field(default_factory=list)
+
+
+def _contact_sources(model: MechanicalModel, args) -> dict:
+    """Gap functions of the contacts and the rows a captured (persistent) contact adds: A_c q'' = b_c."""
+    from mechsys.numeric.lambdify import matrix_source
+
+    gap_contacts = [c for c in model.kin.contacts if c["gap"] is not None]
+    if not gap_contacts:
+        empty = matrix_source(sp.zeros(0, 1), *args)
+        return {"gaps": empty, "gap_A": matrix_source(sp.zeros(0, len(model.q)), *args), "gap_b": empty,
+                "gap_names": []}
+    vn = sp.Matrix([c["vn"] for c in gap_contacts])
+    return {"gaps": matrix_source(sp.Matrix([c["gap"] for c in gap_contacts]), *args),
+            "gap_A": matrix_source(model.partials(vn), *args),
+            "gap_b": matrix_source(-model.dt(vn), *args),
+            "gap_names": [c["name"] for c in gap_contacts]}
 
 
 def compile_model(model: MechanicalModel) -> Compiled:
@@ -63,6 +83,7 @@ def compile_model(model: MechanicalModel) -> Compiled:
             "n": len(model.q), "m": len(model.kin.constraints),
             "events": matrix_source(sp.Matrix([e[1] for e in model.events]) if model.events else sp.zeros(0, 1),
                                     *args),
+            **_contact_sources(model, args),
         }
         cache.store(key, desc)
     out = Compiled(equations_from_source(desc["eqs"]), *(matrix_from_source(desc[k]) for k in
@@ -70,6 +91,10 @@ def compile_model(model: MechanicalModel) -> Compiled:
                    desc["n"], desc["m"], time.perf_counter() - t0)
     out.cache_hit = hit
     out.events = matrix_from_source(desc["events"])
+    out.gaps = matrix_from_source(desc["gaps"])
+    out.gap_A = matrix_from_source(desc["gap_A"])
+    out.gap_b = matrix_from_source(desc["gap_b"])
+    out.gap_names = desc["gap_names"]
     model._simulation_compiled = out
     return out
 
@@ -90,6 +115,7 @@ class SimulationResult:
     warnings: list[str] = field(default_factory=list)
     driving: dict = field(default_factory=dict)  # prescribed coordinate -> driving force/torque at each output
     events: list[dict] = field(default_factory=list)  # {"t", "event", "state": {...}} in time order
+    impacts: list[dict] = field(default_factory=list)  # {"t", "contact", "impulse", "rates_before", ...}
 
     @property
     def E(self) -> np.ndarray:
@@ -116,14 +142,20 @@ class RightHandSide:
         self.c = c
         self.p = p
         self.calls = 0
+        self.persistent = []
+
+    persistent: list[int] = []  # indices of captured (resting) gap contacts, added as constraint rows
 
     def accelerations(self, t: float, q: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         M, f = self.c.eqs.evaluate(t, q, u, self.p)
-        if self.c.m == 0:
+        if self.c.m == 0 and not self.persistent:
             return np.linalg.solve(M, f), np.zeros(0)
         A = self.c.A(t, q, u, self.p)
         b = self.c.b(t, q, u, self.p).ravel()
-        n, m = self.c.n, self.c.m
+        if self.persistent:
+            A = np.vstack([A, self.c.gap_A(t, q, u, self.p)[self.persistent]])
+            b = np.concatenate([b, self.c.gap_b(t, q, u, self.p).ravel()[self.persistent]])
+        n, m = self.c.n, A.shape[0]
         K = np.block([[M, A.T], [A, np.zeros((m, m))]])
         sol = np.linalg.lstsq(K, np.concatenate([f, b]), rcond=None)[0] if np.linalg.cond(K) > 1e14 else \
             np.linalg.solve(K, np.concatenate([f, b]))
@@ -169,6 +201,93 @@ def _event_functions(model: MechanicalModel, c: Compiled, p: np.ndarray) -> list
     return fns
 
 
+def _integrate_with_impacts(model, c, rhs, p, grid, y0, method, rtol, atol, event_fns, note_events,
+                            capture_velocity):
+    """Segments between impacts: gap = 0 (closing) stops the integrator, the impulse law gives the velocities of
+    separation, and integration restarts. Rest rule: an impact whose approach speed is below capture_velocity is
+    plastic and its contact becomes persistent (a constraint row), so a bouncing ball ends in finitely many
+    impacts instead of a Zeno sequence. Persistent contacts do not lift off again (documented limitation)."""
+    from mechsys.analysis.collide import resolve
+
+    n = c.n
+    impacts: list[dict] = []
+    times, states = [0.0], [y0]
+    t, y = 0.0, y0.copy()
+    steps = 0
+    t_end = float(grid[-1])
+    stopped = False
+    guard = 0
+    while t < t_end and not stopped:
+        guard += 1
+        if guard > 100000:
+            raise AnalysisError("more than 100000 impacts: increase the capture velocity")
+        gap_events = []
+        for k in range(len(c.gap_names)):
+            if k in rhs.persistent:
+                continue
+
+            def g(tt, yy, k=k):
+                return float(c.gaps(tt, yy[:n], yy[n:], p)[k, 0])
+            g.direction, g.terminal = -1.0, True
+            gap_events.append((k, g))
+        fns = [g for _, g in gap_events] + list(event_fns)
+        t_eval = grid[(grid > t) & (grid <= t_end)]
+        sol = solve_ivp(rhs, (t, t_end), y, method=method, rtol=rtol, atol=atol, t_eval=t_eval, events=fns or None)
+        if not sol.success:
+            raise AnalysisError(f"integration failed at t = {sol.t[-1]:.6g}: {sol.message}")
+        steps += len(sol.t)
+        if len(sol.t):
+            times += list(sol.t)
+            states += list(np.asarray(sol.y).T)
+        user = type(sol)(sol)
+        user.t_events = sol.t_events[len(gap_events):] if sol.t_events else None
+        user.y_events = sol.y_events[len(gap_events):] if sol.y_events else None
+        if note_events(user) and sol.status == 1:
+            stopped = True
+            break
+        if sol.status != 1:
+            break
+        hit = [(float(ts[-1]), k) for (k, _), ts in zip(gap_events, sol.t_events) if len(ts)]
+        if not hit:
+            break
+        t_hit = min(ts for ts, _ in hit)
+        k_hit = [gap_events[i][0] for i, ((k, _), ts) in enumerate(zip(gap_events, sol.t_events)) if len(ts)]
+        y = sol.y_events[[i for i, ts in enumerate(sol.t_events[:len(gap_events)]) if len(ts)][0]][-1].copy()
+        t = t_hit
+        q, u = y[:n], y[n:]
+        gaps = c.gaps(t, q, u, p).ravel()
+        touching = [c.gap_names[k] for k in range(len(c.gap_names))
+                    if k not in rhs.persistent and abs(gaps[k]) <= 1e-9 * (1 + np.max(np.abs(q)))] or \
+                   [c.gap_names[k] for k in k_hit]
+        try:
+            res = resolve(model, None, q, u, t, only=touching)
+        except AnalysisError:
+            continue  # grazing contact: nothing to resolve
+        speed = float(np.max(-res.normal_velocity_before[[res.contacts.index(x) for x in touching]]))
+        u_new = res.rates_after
+        captured = speed < capture_velocity
+        for name in touching:
+            k = c.gap_names.index(name)
+            j = res.contacts.index(name)
+            if res.impulses[j] > 0 or res.normal_velocity_before[j] < 0:
+                impacts.append({"t": t, "contact": name, "impulse": float(res.impulses[j]),
+                                "rates_before": {cn: float(v) for cn, v in zip(model.coordinates, u)},
+                                "rates_after": {cn: float(v) for cn, v in zip(model.coordinates, u_new)},
+                                "energy_loss": res.energy_loss, "captured": captured})
+            if captured:
+                rhs.persistent.append(k)
+        if captured:  # plastic: remove the normal velocity of the resting contacts
+            A = c.gap_A(t, q, u, p)[rhs.persistent]
+            u_new = u - np.linalg.lstsq(A, A @ u, rcond=None)[0]
+        y = np.concatenate([q, u_new])
+        times.append(t)
+        states.append(y)
+    order = np.argsort(np.array(times), kind="stable")
+    T_arr = np.array(times)[order]
+    Y = np.array(states)[order]
+    return T_arr, Y, steps, impacts, stopped
+
+
 def stiffness(rhs: RightHandSide, t0: float, y0: np.ndarray, t_end: float) -> tuple[float, float]:
     """(spectral radius of the RHS Jacobian, stiffness ratio) at the start, by finite differences; a heuristic
     for choosing an implicit method, never used for results."""
@@ -193,7 +312,8 @@ def choose_method(rhs: RightHandSide, t0: float, y0: np.ndarray, t_end: float) -
 
 
 def simulate(model: MechanicalModel, t_end: float, dt: float | None = None, method: str = "auto",
-             rtol: float = 1e-10, atol: float = 1e-12, overrides_p: np.ndarray | None = None) -> SimulationResult:
+             rtol: float = 1e-10, atol: float = 1e-12, overrides_p: np.ndarray | None = None,
+             capture_velocity: float = 1e-10) -> SimulationResult:
     """Integrate from the file's initial state to t_end; outputs every dt (default t_end/1000)."""
     if method not in METHODS:
         raise AnalysisError(f"unknown method {method!r}; use one of {', '.join(METHODS)}")
@@ -227,6 +347,9 @@ def simulate(model: MechanicalModel, t_end: float, dt: float | None = None, meth
     steps = 0
     event_fns = _event_functions(model, c, p)
     recorded: list[dict] = []
+    impacts: list[dict] = []
+    if c.gap_names and c.m:
+        raise AnalysisError("impacts in closed-loop simulations are not supported yet")
 
     def note_events(sol) -> bool:
         """Record the crossings of this solve; True when a stopping event fired."""
@@ -259,6 +382,9 @@ def simulate(model: MechanicalModel, t_end: float, dt: float | None = None, meth
                 note_events(sol)
         Y = np.array(ys)
         grid = np.array(times)
+    elif c.gap_names:
+        grid, Y, steps, impacts, stopped = _integrate_with_impacts(model, c, rhs, p, grid, ys[0], chosen, rtol, atol,
+                                                                   event_fns, note_events, capture_velocity)
     else:
         sol = solve_ivp(rhs, (0.0, float(grid[-1])), ys[0], method=chosen, t_eval=grid, rtol=rtol, atol=atol,
                         events=event_fns or None)
@@ -288,5 +414,7 @@ def simulate(model: MechanicalModel, t_end: float, dt: float | None = None, meth
         for k in rows:
             driving[model.kin.constraints[k].name[6:-1]] = lams[:, k]
     recorded.sort(key=lambda ev: ev["t"])
-    return SimulationResult(list(model.coordinates), grid, q, u, T, V, res, chosen, rhs.calls, steps, timings,
-                            warnings, driving, recorded)
+    out = SimulationResult(list(model.coordinates), grid, q, u, T, V, res, chosen, rhs.calls, steps, timings,
+                           warnings, driving, recorded)
+    out.impacts = impacts
+    return out

@@ -51,6 +51,9 @@ def summary_table(result) -> list[Table]:
     t.add("max relative energy drift", result.energy_drift)
     t.add("max constraint residual", float(np.max(result.residual)) if len(result.residual) else 0.0)
     t.add("events recorded", len(result.events))
+    if result.impacts:
+        t.add("impacts", len(result.impacts))
+        t.add("last impact at t", result.impacts[-1]["t"])
     for name, values in result.driving.items():
         t.add(f"driving force on {name} at t_end", float(values[-1]))
     for k, v in result.timings.items():
@@ -109,4 +112,20 @@ def events_text(events: list[dict], coordinates: list[str], suffix: str) -> str:
     lines = [",".join(["t", "event", "action", *cols])]
     for ev in events:
         lines.append(",".join([repr(ev["t"]), ev["event"], ev["action"], *[repr(ev["state"][c]) for c in cols]]))
+    return "\n".join(lines) + "\n"
+
+
+def impacts_text(impacts: list[dict], coordinates: list[str], suffix: str) -> str:
+    """The impact table: t, contact, impulse, energy lost, captured, then the rates before and after."""
+    if suffix == ".json":
+        return json.dumps(impacts, indent=1) + "\n"
+    if suffix not in (".csv", ""):
+        raise InputError(f"unsupported impacts file suffix {suffix!r} (use .csv or .json)")
+    cols = ["t", "contact", "impulse", "energy_loss", "captured"]
+    cols += [f"before.der({c})" for c in coordinates] + [f"after.der({c})" for c in coordinates]
+    lines = [",".join(cols)]
+    for im in impacts:
+        row = [repr(im["t"]), im["contact"], repr(im["impulse"]), repr(im["energy_loss"]), str(im["captured"])]
+        row += [repr(im["rates_before"][c]) for c in coordinates] + [repr(im["rates_after"][c]) for c in coordinates]
+        lines.append(",".join(row))
     return "\n".join(lines) + "\n"
