@@ -68,6 +68,9 @@ def compile_model(model: MechanicalModel) -> Compiled:
     t0 = time.perf_counter()
     key = cache.model_key(model, "simulate")
     desc = cache.load(key)
+    required = {"eqs", "A", "b", "phi", "T", "V", "cv", "n", "m", "events", "gaps", "gap_A", "gap_b", "gap_names"}
+    if desc is not None and not required <= set(desc):
+        desc = None  # an entry in an older format
     hit = desc is not None
     if not hit:
         args = (model.t, model.q, model.u, model.parameter_symbols)

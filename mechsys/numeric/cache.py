@@ -46,9 +46,10 @@ def code_fingerprint() -> str:
     if _FINGERPRINT is None:
         root = Path(__file__).resolve().parents[1]
         digest = hashlib.sha256()
-        for sub in ("model", "mechanics", "numeric"):
-            for f in sorted((root / sub).glob("*.py")):
-                digest.update(f.read_bytes())
+        files = [f for sub in ("model", "mechanics", "numeric") for f in sorted((root / sub).glob("*.py"))]
+        files.append(root / "analysis" / "simulate.py")  # it defines what a cache entry holds
+        for f in files:
+            digest.update(f.read_bytes())
         _FINGERPRINT = digest.hexdigest()[:16]
     return _FINGERPRINT
 
