@@ -586,7 +586,8 @@ def sweep(
         None, "--param", "-p", metavar="NAME=START:STOP:N",
         help="Swept input: a parameter, a coordinate's initial value or der(NAME) its initial rate; N points from "
              "START to STOP. Repeatable (Cartesian grid). With --sample: NAME=LO:HI is the box."),
-    run_: str = typer.Option(..., "--run", "-r", help="Analysis of each task: equilibria, simulate, modes or info."),
+    run_: str = typer.Option(..., "--run", "-r", help="Analysis of each task: equilibria, simulate, modes, info, "
+                                                       "bifurcations or derive (mechsys/analysis/tasks.py)."),
     sample: Optional[str] = typer.Option(None, "--sample", metavar="latin:N|random:N",
                                          help="N points drawn inside the --param boxes instead of the grid."),
     seed: int = typer.Option(0, "--seed", help="Seed of --sample."),
@@ -662,17 +663,16 @@ def sweep(
         for label, value in (("tasks", summary.tasks), ("done", summary.done), ("failed", summary.failed),
                              ("skipped (finished before)", summary.skipped), ("kept (other tasks in the file)",
                                                                              summary.kept),
-                             ("executor", f"{summary.executor} ({summary.workers} workers)"),
+                             ("executor", f"{summary.executor} ({summary.workers} worker"
+                                          f"{'s' if summary.workers != 1 else ''})"),
                              ("wall time [s]", round(summary.seconds, 3)), ("output", summary.output or "stdout")):
             t.add(label, value)
         t.notes += summary.errors
         rendered = render_tables([t], fmt.value, {**summary.to_dict(), "errors": summary.errors})
-        if output is None:
-            err.print(rendered) if not isinstance(rendered, str) else sys.stderr.write(rendered)
-        elif isinstance(rendered, str):
-            sys.stdout.write(rendered)
+        if isinstance(rendered, str):  # the summary goes to stderr when the table takes stdout
+            (sys.stdout if output is not None else sys.stderr).write(rendered)
         else:
-            Console().print(rendered)
+            (Console() if output is not None else err).print(rendered)
         if summary.tasks and summary.done + summary.skipped == 0:
             sys.stderr.write("mechsys: every task failed (see the error column)\n")
             return 1

@@ -64,7 +64,8 @@ class ImpactModel:
 
 
 def resolve(model: MechanicalModel, contact: str | None = None, q: np.ndarray | None = None,
-            u: np.ndarray | None = None, t: float = 0.0, only: list[str] | None = None) -> ImpactResult:
+            u: np.ndarray | None = None, t: float = 0.0, only: list[str] | None = None,
+            restitution: float | None = None) -> ImpactResult:
     """Resolve one impact at the state (q, u) (default: the file's initial state). All approaching contacts (or
     just ``contact``) are solved together: U >= 0 with v+ + e v- >= 0, complementary (an active-set search)."""
     im = model.__dict__.get("_impact_model") or ImpactModel(model)
@@ -83,7 +84,8 @@ def resolve(model: MechanicalModel, contact: str | None = None, q: np.ndarray | 
     approaching = [k for k in candidates if v_before[k] < 0]
     if not approaching:
         raise AnalysisError("no contact is approaching (normal velocity >= 0): there is no impact to resolve")
-    e = np.array([float(im.e[k](t, [v_before[k]], [], p)[0, 0]) for k in range(len(im.names))])
+    e = np.array([float(im.e[k](t, [v_before[k]], [], p)[0, 0]) if restitution is None else restitution
+                  for k in range(len(im.names))])
     n, m = len(u), A.shape[0]
     best = None
     for size in range(1, len(approaching) + 1):
@@ -133,8 +135,7 @@ def joint_impulses(model: MechanicalModel, q, u_before, u_after, U, p, t: float)
         momentum[b.name] = mass * (vg(t, q, u_after, p).ravel() - vg(t, q, u_before, p).ravel())
     external: dict[str, np.ndarray] = {}
     for k, c in enumerate(model.kin.contacts):
-        n = np.array(sp.Matrix(c["normal"]).xreplace(dict(zip(model.parameter_symbols, map(sp.Float, p)))),
-                     dtype=float).ravel()
+        n = cm(sp.Matrix(c["normal"]), model.t, model.q, model.u, model.parameter_symbols)(t, q, u_before, p).ravel()
         for link, _pos, sign in c["points"]:
             external[link] = external.get(link, np.zeros(3)) + sign * U[k] * n
     children: dict[str, list[str]] = {}

@@ -224,10 +224,14 @@ def _integrate_with_impacts(model, c, rhs, p, grid, y0, method, rtol, atol, even
         guard += 1
         if guard > 100000:
             raise AnalysisError("more than 100000 impacts: increase the capture velocity")
+        q0, u0 = y[:n], y[n:]
+        gaps0 = c.gaps(t, q0, u0, p).ravel()
+        vn0 = c.gap_A(t, q0, u0, p) @ u0  # (gap contacts are scleronomic here)
+        touching0 = np.abs(gaps0) <= 1e-9 * (1 + np.max(np.abs(q0)))
         gap_events = []
         for k in range(len(c.gap_names)):
-            if k in rhs.persistent:
-                continue
+            if k in rhs.persistent or (touching0[k] and abs(vn0[k]) <= 1e-12 * max(1.0, np.max(np.abs(u0)))):
+                continue  # touching at rest relative to each other: a zero-length crossing at the segment start
 
             def g(tt, yy, k=k):
                 return float(c.gaps(tt, yy[:n], yy[n:], p)[k, 0])
@@ -268,20 +272,28 @@ def _integrate_with_impacts(model, c, rhs, p, grid, y0, method, rtol, atol, even
             continue  # grazing contact: nothing to resolve
         speed = float(np.max(-res.normal_velocity_before[[res.contacts.index(x) for x in touching]]))
         u_new = res.rates_after
-        captured = speed < capture_velocity
+        captured = False
+        if speed < capture_velocity:
+            # rest rule: a slow impact is plastic; the contact stays closed only if it is pressed (compressive
+            # force), so bodies that merely touch (a Newton's cradle at rest) are not glued together
+            res = resolve(model, None, q, u, t, only=touching, restitution=0.0)
+            u_new = res.rates_after
+            trial = [c.gap_names.index(x) for x in touching]
+            rhs.persistent.extend(trial)
+            lam = rhs.accelerations(t, q, u_new)[1][-len(trial):]
+            if np.all(lam > 1e-12 * max(1.0, float(np.max(np.abs(lam))))):
+                captured = True
+            else:
+                del rhs.persistent[-len(trial):]
         for name in touching:
             k = c.gap_names.index(name)
             j = res.contacts.index(name)
-            if res.impulses[j] > 0 or res.normal_velocity_before[j] < 0:
+            if captured or -res.normal_velocity_before[j] >= capture_velocity:  # round-off touches are no impacts
                 impacts.append({"t": t, "contact": name, "impulse": float(res.impulses[j]),
                                 "rates_before": {cn: float(v) for cn, v in zip(model.coordinates, u)},
                                 "rates_after": {cn: float(v) for cn, v in zip(model.coordinates, u_new)},
                                 "energy_loss": res.energy_loss, "captured": captured})
-            if captured:
-                rhs.persistent.append(k)
-        if captured:  # plastic: remove the normal velocity of the resting contacts
-            A = c.gap_A(t, q, u, p)[rhs.persistent]
-            u_new = u - np.linalg.lstsq(A, A @ u, rcond=None)[0]
+        u_new = _sequential_impacts(model, c, p, t, q, u_new, rhs, impacts, resolve)
         y = np.concatenate([q, u_new])
         times.append(t)
         states.append(y)
@@ -289,6 +301,28 @@ def _integrate_with_impacts(model, c, rhs, p, grid, y0, method, rtol, atol, even
     T_arr = np.array(times)[order]
     Y = np.array(states)[order]
     return T_arr, Y, steps, impacts, stopped
+
+
+def _sequential_impacts(model, c, p, t, q, u, rhs, impacts, resolve) -> np.ndarray:
+    """Touching contacts that approach after an impact collide at the same instant, one after another
+    (Krodkiewski problem 55): repeat until no touching contact approaches."""
+    for _ in range(1000):
+        gaps = c.gaps(t, q, u, p).ravel()
+        vn = c.gap_A(t, q, u, p) @ u
+        scale = 1e-12 * max(1.0, float(np.max(np.abs(u))))
+        approaching = [c.gap_names[k] for k in range(len(c.gap_names)) if k not in rhs.persistent
+                       and abs(gaps[k]) <= 1e-9 * (1 + np.max(np.abs(q))) and vn[k] < -scale]
+        if not approaching:
+            return u
+        res = resolve(model, None, q, u, t, only=approaching[:1])
+        name = approaching[0]
+        j = res.contacts.index(name)
+        impacts.append({"t": t, "contact": name, "impulse": float(res.impulses[j]),
+                        "rates_before": {cn: float(v) for cn, v in zip(model.coordinates, u)},
+                        "rates_after": {cn: float(v) for cn, v in zip(model.coordinates, res.rates_after)},
+                        "energy_loss": res.energy_loss, "captured": False})
+        u = res.rates_after
+    raise AnalysisError("more than 1000 sequential impacts at one instant")
 
 
 def stiffness(rhs: RightHandSide, t0: float, y0: np.ndarray, t_end: float) -> tuple[float, float]:

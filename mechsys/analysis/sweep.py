@@ -19,6 +19,7 @@ import math
 import os
 import re
 import tempfile
+import threading
 import time
 from collections import OrderedDict
 from dataclasses import dataclass, field
@@ -33,12 +34,15 @@ from mechsys.errors import InputError, MechsysError
 EXECUTORS = ("processes", "dask")
 FIXED_TAIL = ("status", "error", "seconds")
 TASK = "task"
-OPTION_KEYS = {  # analysis -> option keys it understands (see mechsys/analysis/tasks.py)
+OPTION_KEYS = {  # analysis -> option keys it understands (see mechsys/analysis/tasks.py); others: any key
     "simulate": ("t_end", "dt", "method"),
     "equilibria": ("search",),
     "modes": ("at",),
     "info": (),
+    "bifurcations": ("parameter", "start", "stop", "points"),
+    "derive": ("method",),
 }
+REQUIRED_OPTIONS = {"bifurcations": ("parameter", "start", "stop")}
 
 
 # ===================================================================================== specification
@@ -112,13 +116,16 @@ def parse_options(items: Iterable[str] | None, analysis: str) -> dict:
     import difflib
 
     out: dict[str, Any] = {}
-    allowed = OPTION_KEYS.get(analysis, ())
+    allowed = OPTION_KEYS.get(analysis)
     for item in items or []:
         key, sep, value = item.partition("=")
         key = key.strip()
         if not sep or not key or not value.strip():
             raise InputError(f"--option {item!r}: expected KEY=VALUE")
         head, dot, sub = key.partition(".")
+        if allowed is None:  # an analysis this module does not know: pass the option on
+            out[key] = _number_or_text(value)
+            continue
         if head not in allowed or (head in ("search", "at")) != bool(dot) or (dot and not sub):
             names = [f"{k}.NAME" if k in ("search", "at") else k for k in allowed]
             close = difflib.get_close_matches(key, names, n=1)
@@ -140,6 +147,9 @@ def parse_options(items: Iterable[str] | None, analysis: str) -> dict:
             out.setdefault("at", {})[sub] = v
         else:
             out[head] = _number_or_text(value)
+    missing = [k for k in REQUIRED_OPTIONS.get(analysis, ()) if k not in out]
+    if missing:
+        raise InputError(f"--run {analysis} needs " + " ".join(f"--option {k}=..." for k in missing))
     return out
 
 
@@ -205,6 +215,7 @@ class SweepSpec:
 # ===================================================================================== worker side
 _BASES: "OrderedDict[tuple, _Base]" = OrderedDict()  # per worker process: compile once, reuse for every task
 _MAX_BASES = 8
+_LOCK = threading.Lock()
 
 
 class _Base:
@@ -339,6 +350,11 @@ def _scalar(v: Any) -> Any:
 
 def run_chunk(spec: dict, chunk: list[tuple[int, dict[str, float]]]) -> list[dict]:
     """Run tasks (id, input values) in this worker; every failure is recorded, none escapes."""
+    with _LOCK:  # a Dask worker may run several threads: tasks of one process share the base model
+        return _run_chunk(spec, chunk)
+
+
+def _run_chunk(spec: dict, chunk: list[tuple[int, dict[str, float]]]) -> list[dict]:
     from mechsys.analysis.tasks import ANALYSES
 
     results = []
@@ -578,7 +594,8 @@ def run_processes(spec: SweepSpec, chunks: list, jobs: int, on_chunk: Callable[[
     import concurrent.futures as cf
     import multiprocessing
 
-    pool = cf.ProcessPoolExecutor(max_workers=jobs, mp_context=multiprocessing.get_context("spawn"))
+    pool = cf.ProcessPoolExecutor(max_workers=jobs, mp_context=multiprocessing.get_context("spawn"),
+                                  initializer=_ignore_interrupts)
     try:
         futures = {pool.submit(run_chunk, payload, chunk): chunk for chunk in chunks}
         for fut in cf.as_completed(futures):
@@ -587,10 +604,19 @@ def run_processes(spec: SweepSpec, chunks: list, jobs: int, on_chunk: Callable[[
             except Exception as exc:  # noqa: BLE001 - a dead worker fails its chunk, not the sweep
                 results = _crashed(futures[fut], exc)
             on_chunk(results)
-    except BaseException:
+    except BaseException:  # Ctrl-C: stop now; the caller writes the finished tasks
         pool.shutdown(wait=False, cancel_futures=True)
+        for proc in list((getattr(pool, "_processes", None) or {}).values()):
+            proc.terminate()
         raise
     pool.shutdown(wait=True)
+
+
+def _ignore_interrupts() -> None:
+    """Worker processes leave Ctrl-C to the main process, which stops them."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 def dask_client(scheduler: str | None, jobs: int):
@@ -619,9 +645,21 @@ def dask_client(scheduler: str | None, jobs: int):
             client.close()
             raise MechsysError(f"the Dask workers cannot run mechsys ({one_line(exc)}): install mechsys on "
                                "every worker machine") from None
+        import sys
+
+        import mechsys
+
+        others = sorted({v for v in versions.values() if v != mechsys.__version__})
+        if others:
+            sys.stderr.write(f"mechsys: warning: Dask workers run mechsys {', '.join(others)} "
+                             f"(this is {mechsys.__version__}); results may differ\n")
         return client, None, max(1, len(versions))
-    cluster = LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True, dashboard_address=None,
-                           silence_logs=logging.ERROR)
+    import warnings
+
+    with warnings.catch_warnings():  # "port 8787 is already in use": another cluster has it, ours needs none
+        warnings.filterwarnings("ignore", message=".*already in use", category=UserWarning)
+        cluster = LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True, dashboard_address=None,
+                               silence_logs=logging.ERROR)
     return Client(cluster), cluster, jobs
 
 
@@ -694,10 +732,12 @@ def sweep(spec: SweepSpec, names: list[str], tasks: list[dict[str, float]], resu
             write_table(output, table())
             last_write[0] = time.perf_counter()
 
+    if progress is not None:
+        progress(0, len(pending))
     try:
         if pending:
             if executor == "dask":
-                client, cluster, workers = dask_client(scheduler, jobs or os.cpu_count() or 1)
+                client, cluster, workers = dask_client(scheduler, min(jobs or os.cpu_count() or 1, len(pending)))
                 summary.workers = workers
                 try:
                     run_dask(spec, chunked(pending, chunk_size(len(pending), workers)), client, on_chunk)
@@ -710,7 +750,7 @@ def sweep(spec: SweepSpec, names: list[str], tasks: list[dict[str, float]], resu
                 summary.workers = workers
                 run_processes(spec, chunked(pending, chunk_size(len(pending), workers)), workers, on_chunk)
     finally:
-        if output is not None and (new or not output.exists()):
+        if output is not None and (new or old_for_task or others):
             write_table(output, table())  # also after an interrupt: finished tasks are kept
     summary.seconds = time.perf_counter() - t0
     return table(), summary
