@@ -4,7 +4,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: install demo test test-fast bench clean
+.PHONY: install demo test test-fast check bench clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -20,13 +20,18 @@ demo: $(STAMP)
 	$(BIN)/mechsys derive systems/centrifuge.yaml --check
 	$(BIN)/mechsys equilibria systems/centrifuge.yaml
 
-## test: install, then run the whole suite (slow tests included, as in CI)
+## test: install, run the textbook checks of every bundled model, then the whole suite (slow tests included)
 test: $(STAMP)
+	$(BIN)/mechsys check systems/ -f markdown
 	$(BIN)/python -m pytest -n 2 -q
 
 ## test-fast: skip the tests marked slow
 test-fast: $(STAMP)
 	$(BIN)/python -m pytest -n 2 -q -m "not slow"
+
+## check: run the textbook expectations of every bundled model (docs/check.md); JUnit report in check-report.xml
+check: $(STAMP)
+	$(BIN)/mechsys check systems/ --junit check-report.xml
 
 ## bench: speed benchmarks, reported as ratios against the named baselines
 bench: $(STAMP)

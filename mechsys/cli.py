@@ -469,11 +469,17 @@ def plot_result(
     result: Path = typer.Argument(..., help="A result file written by `mechsys simulate` (.csv or .json)."),
     output: Path = typer.Option(..., "--output", "-o", help="Figure file (.png, .svg, .pdf)."),
 ) -> None:
-    """Plot an existing simulation result: time histories, rates, energy and a phase portrait."""
+    """Plot a simulation result (time histories, rates, energy, phase portrait) or a sweep table of equilibria
+    (a stability map)."""
 
     def body() -> int:
-        from mechsys.report.simulation import plot_histories, read_result
+        from mechsys.report.simulation import plot_histories, plot_sweep_table, read_result
 
+        if result.suffix == ".csv" and result.exists():
+            header = result.read_text(encoding="utf-8").split("\n", 1)[0].split(",")
+            if "status" in header:  # a sweep table: the stability map
+                plot_sweep_table(result, str(output))
+                return 0
         names, data = read_result(result)
         plot_histories(names, data, str(output))
         return 0

@@ -95,7 +95,23 @@ def _derive(model: MechanicalModel, options: dict) -> Outputs:
     return out
 
 
+def _collide(model: MechanicalModel, options: dict) -> Outputs:
+    from mechsys.analysis.collide import resolve
+
+    r = resolve(model, options.get("impact"))
+    out: Outputs = {"energy_loss": r.energy_loss}
+    for name, U in zip(r.contacts, r.impulses):
+        out[f"impulse({name})"] = float(U)
+    for c, v in zip(r.coordinates, r.rates_after):
+        out[f"after.der({c})"] = float(v)
+    for link, vec in r.joint_impulses.items():
+        for axis, x in zip("xyz", vec):
+            out[f"joint({link}).{axis}"] = x
+    return out
+
+
 ANALYSES: dict[str, Callable[[MechanicalModel, dict], Outputs]] = {
+    "collide": _collide,
     "derive": _derive,
     "bifurcations": _bifurcations,
     "info": _info,
@@ -114,6 +130,6 @@ def run_task(path: str, analysis: str, overrides: dict | None = None, options: d
         from mechsys.errors import InputError
 
         raise InputError(f"unknown analysis {analysis!r} (choose from {', '.join(ANALYSES)})")
-    release = analysis == "simulate"
+    release = analysis in ("simulate", "collide")
     model = mechsys.load(path, overrides or {}, release_prescribed=release)
     return ANALYSES[analysis](model, options or {})

@@ -344,7 +344,7 @@ class Expectation(Strict):
     """An expected analysis result with its tolerance, checked by `mechsys check`."""
 
     name: str = Field(description="what the check is called in reports")
-    analysis: Literal["info", "derive", "equilibria", "modes", "simulate", "bifurcations"]
+    analysis: Literal["info", "derive", "equilibria", "modes", "simulate", "bifurcations", "collide"]
     set: dict[str, Union[int, float, str]] = Field(default_factory=dict, description="overrides, like --set")
     options: dict[str, Union[int, float, str, bool]] = Field(default_factory=dict,
                                                              description="analysis options, e.g. t_end")

@@ -19,6 +19,45 @@ def result_text(names: list[str], data: np.ndarray, suffix: str) -> str:
     raise InputError(f"unsupported result file suffix {suffix!r} (use .csv or .json)")
 
 
+def plot_sweep_table(path: Path, out: str) -> None:
+    """A stability map from a `mechsys sweep ... --run equilibria` table: the equilibrium coordinates against the
+    first swept input, filled where stable and hollow where not (the book's static characteristic)."""
+    import csv
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rows = list(csv.DictReader(Path(path).open(encoding="utf-8")))
+    if not rows or "status" not in rows[0]:
+        raise InputError(f"{path}: neither a simulation result nor a sweep table")
+    cols = list(rows[0])
+    x_name = cols[1] if cols[0] in ("task", "id") else cols[0]
+    coords = sorted({c.split(".", 1)[1] for c in cols if c.startswith("eq") and "." in c
+                     and not c.endswith((".stability", ".max_real")) and "der(" not in c})
+    if not coords:
+        raise InputError(f"{path}: the sweep table has no equilibrium coordinates to map")
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    for r in rows:
+        if r.get("status") != "ok":
+            continue
+        x = float(r[x_name])
+        k = 1
+        while f"eq{k}.{coords[0]}" in r and r[f"eq{k}.{coords[0]}"] not in ("", None):
+            y = float(r[f"eq{k}.{coords[0]}"])
+            stable = r.get(f"eq{k}.stability") in ("stable", "asymptotically stable")
+            ax.plot([x], [y], "o", ms=4, color="C0" if stable else "C3", mfc="C0" if stable else "none")
+            k += 1
+    ax.set_xlabel(x_name)
+    ax.set_ylabel(coords[0])
+    ax.set_title("equilibria (filled: stable, hollow: unstable)")
+    ax.grid(True, alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(out)
+    plt.close(fig)
+
+
 def read_result(path: Path) -> tuple[list[str], np.ndarray]:
     """Read a result file written by `mechsys simulate` (CSV or JSON)."""
     try:
