@@ -575,9 +575,10 @@ def test_restitution_may_depend_on_the_approach_speed(tmp_path):
 
 
 # ================================================================================================================
-# Part 2: impacts inside `mechsys simulate` (gap contacts as events, impulse law, rest rule with a capture
-# velocity, `--impacts FILE.csv`, SimulationResult.impacts). These tests target the simulate-impacts feature,
-# which was being written in parallel with this file: they fail until it lands.
+# Part 2: impacts inside `mechsys simulate` (gap contacts as events, impulse law, sequential impacts at one
+# instant, rest rule with a capture velocity, `--impacts FILE.csv`, SimulationResult.impacts). Written in parallel
+# with that feature (they failed until it landed); each run is in a child process with a time limit, so an endless
+# impact sequence fails the test instead of hanging the suite.
 # ================================================================================================================
 def _simulate_child(conn, path, overrides, t_end, dt, kwargs):
     try:
