@@ -4,7 +4,6 @@ from __future__ import annotations
 import json
 import os
 import sys
-import tempfile
 from enum import Enum
 from pathlib import Path
 from typing import Callable, List, Optional
@@ -46,22 +45,9 @@ class Method(str, Enum):
 
 def write_atomic(path: Path, text: str) -> None:
     """Write ``text`` to ``path`` through a temporary file and a rename, so a failure never leaves half a file."""
-    path = Path(path)
-    directory = path.parent if str(path.parent) else Path(".")
-    if not directory.is_dir():
-        raise InputError(f"--output {path}: directory {directory} does not exist")
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=directory)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            fh.write(text)
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    from mechsys.report.files import write_text_atomic
+
+    write_text_atomic(path, text)
 
 
 def emit(text: str, output: Optional[Path]) -> None:
@@ -344,7 +330,6 @@ def modes(
             modal.plot_modes(result, str(plot))
         if state_space or transfer:
             A, B, C, D = result.system.state_space()
-            n = A.shape[0] // 2
             states = result.system.names + [f"der({c})" for c in result.system.names]
             if state_space:
                 tables += [rep.matrix_table("A", states, A), rep.matrix_table("B", result.coordinates, B, states),
@@ -360,7 +345,6 @@ def modes(
                 tables.append(t)
                 payload["transfer_function"] = {"input": inp, "response": out, "numerator": list(num),
                                                 "denominator": list(den)}
-            del n
         emit_tables(tables, fmt, output, payload)
         return 0
 

@@ -10,7 +10,7 @@ import pytest
 from typer.testing import CliRunner
 
 from mechsys.analysis import sweep as sw
-from mechsys.analysis.tasks import ANALYSES, run_task
+from mechsys.analysis.tasks import run_task
 from mechsys.cli import app
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -233,8 +233,6 @@ def test_latin_sampling_is_reproducible_stratified_and_inside_the_box(tmp_path):
     (["--param", "Mo=1:3:0", "--run", "equilibria"], "expected NAME=START:STOP:N"),
     (["--run", "equilibria"], "at least one --param"),
     (["--param", "Moo=1:3:3", "--run", "equilibria"], "did you mean 'Mo'"),
-    pytest.param(["--param", "Mo=1:3:3", "--run", "collide"], "not available yet (collide issue)",
-                 marks=pytest.mark.skipif("collide" in ANALYSES, reason="collide is a task analysis now")),
     (["--param", "m=1:3:3", "--run", "bifurcations"], "needs --option parameter=... --option start=..."),
     (["--param", "Mo=1:3:3", "--run", "equilibrium"], "did you mean 'equilibria'"),
     (["--param", "Mo=1:3:3", "--run", "simulate", "--option", "t_ned=3"], "did you mean 't_end'"),
@@ -287,3 +285,18 @@ def test_without_output_the_table_goes_to_stdout():
     assert r.exit_code == 0
     lines = r.stdout.strip().splitlines()
     assert lines[0].startswith("task,Mo,") and len(lines) == 3 and "sweep summary" in r.stderr
+
+
+def test_sweep_runs_collide_tasks(tmp_path):
+    """Impacts plug into the same task interface: the bullet pendulum over the restitution coefficient follows
+    phi' = m2 v rC (1+e)/(IO + m2 rC^2) (Krodkiewski eq. 3.33)."""
+    out = tmp_path / "impacts.csv"
+    r = runner.invoke(app, ["sweep", str(ROOT / "systems" / "bullet_pendulum.yaml"), "--param", "e=0:1:3",
+                            "--run", "collide", "-o", str(out), "--jobs", "1"])
+    assert r.exit_code == 0, r.output
+    rows = read(out)
+    assert len(rows) == 3 and all(row["status"] == "ok" for row in rows)
+    for row in rows:
+        e = float(row["e"])
+        expected = 0.05 * 300 * 0.6 * (1 + e) / (2.0 + 0.05 * 0.6**2)
+        assert abs(float(row["after.der(phi)"]) - expected) < 1e-9 * expected

@@ -11,8 +11,6 @@ from scipy.integrate import solve_ivp
 from mechsys.analysis.equilibria import parameter_values
 from mechsys.errors import AnalysisError
 from mechsys.mechanics.model import MechanicalModel
-from mechsys.numeric.kane import compile_equations
-from mechsys.numeric.lambdify import compile_matrix
 
 METHODS = ("auto", "RK45", "DOP853", "Radau", "BDF", "LSODA")
 

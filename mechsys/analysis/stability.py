@@ -118,7 +118,6 @@ def energy_verdict(problem, e, p: np.ndarray, zero_count: int) -> tuple[str, str
     """Critical case: with only dissipative (or no) non-conservative forces, a strict minimum of the effective
     potential (V - T0, amended by Routh for cyclic momenta) is stable (Lagrange-Dirichlet); no minimum with
     complete damping is unstable (Kelvin-Tait-Chetaev). Otherwise undecided, with the reason."""
-    model = problem.model
     prefix = f"{zero_count} eigenvalue(s) with zero real part (critical case); "
     dissipative, complete, why, positional = _dissipation(problem, e, p)
     if not dissipative:

@@ -455,26 +455,19 @@ def check_output(path: Path | None) -> None:
 
 def write_table(path: Path, table: Table) -> None:
     """Write atomically (temporary file in the same folder, then os.replace)."""
-    directory = path.parent if str(path.parent) else Path(".")
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=directory)
-    try:
+    from mechsys.report.files import atomic_write
+
+    def write(tmp: str) -> None:
         if path.suffix.lower() == ".parquet":
-            os.close(fd)
             pd = _pandas()
             columns = table.columns
             frame = pd.DataFrame([[r.get(c) for c in columns] for r in table.rows], columns=columns)
             frame.to_parquet(tmp, index=False)
         else:
-            with os.fdopen(fd, "w", encoding="utf-8", newline="") as fh:
+            with open(tmp, "w", encoding="utf-8", newline="") as fh:
                 fh.write(table_csv(table))
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+
+    atomic_write(path, write)
 
 
 def read_table(path: Path) -> tuple[list[str], list[dict]]:
