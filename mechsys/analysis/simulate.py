@@ -11,7 +11,8 @@ from mechsys.analysis.equilibria import parameter_values
 from mechsys.errors import AnalysisError
 from mechsys.mechanics.model import MechanicalModel
 
-METHODS = ("auto", "RK45", "DOP853", "Radau", "BDF", "LSODA")
+METHODS = ("auto", "native", "RK45", "DOP853", "Radau", "BDF", "LSODA")
+NATIVE_NOTE = "native: scipy's DOP853 step by step, with the whole loop compiled (numeric/native.py)"
 
 
 @dataclass
@@ -138,18 +139,23 @@ class SimulationResult:
 class RightHandSide:
     """y' = g(t, y) for y = (q, u); with constraints the accelerations solve [[M, A^T], [A, 0]] [q''; -lambda] = [f; b]."""
 
-    def __init__(self, c: Compiled, p: np.ndarray) -> None:
+    def __init__(self, c: Compiled, p: np.ndarray, progress=None) -> None:
         self.c = c
         self.p = p
         self.calls = 0
         self.persistent = []
+        self.progress = progress  # progress(t), called every 200 evaluations
 
     persistent: list[int] = []  # indices of captured (resting) gap contacts, added as constraint rows
 
     def accelerations(self, t: float, q: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         M, f = self.c.eqs.evaluate(t, q, u, self.p)
         if self.c.m == 0 and not self.persistent:
-            return np.linalg.solve(M, f), np.zeros(0)
+            try:
+                return np.linalg.solve(M, f), np.zeros(0)
+            except np.linalg.LinAlgError:
+                raise AnalysisError(f"the mass matrix is singular at t = {t:.6g} (a coordinate without mass or "
+                                    "inertia: make it prescribed or give it mass)") from None
         A = self.c.A(t, q, u, self.p)
         b = self.c.b(t, q, u, self.p).ravel()
         if self.persistent:
@@ -163,6 +169,8 @@ class RightHandSide:
 
     def __call__(self, t: float, y: np.ndarray) -> np.ndarray:
         self.calls += 1
+        if self.progress is not None and self.calls % 200 == 0:
+            self.progress(t)
         n = self.c.n
         q, u = y[:n], y[n:]
         a, _ = self.accelerations(t, q, u)
@@ -219,17 +227,40 @@ def stiffness(rhs: RightHandSide, t0: float, y0: np.ndarray, t_end: float) -> tu
     return radius, radius * (t_end - t0)
 
 
-def choose_method(rhs: RightHandSide, t0: float, y0: np.ndarray, t_end: float) -> tuple[str, str]:
+def choose_method(rhs: RightHandSide, t0: float, y0: np.ndarray, t_end: float,
+                  native_ok: bool = False) -> tuple[str, str]:
     radius, steps_needed = stiffness(rhs, t0, y0, t_end)
     if steps_needed > 5e4:
         return "Radau", f"stiff: fastest decay rate {radius:.3g} 1/s over {t_end - t0:g} s"
-    return "DOP853", f"non-stiff: fastest decay rate {radius:.3g} 1/s"
+    return ("native" if native_ok else "DOP853"), f"non-stiff: fastest decay rate {radius:.3g} 1/s"
+
+
+def native_integrator(model: MechanicalModel, c: Compiled, required: bool):
+    """The compiled DOP853 loop when this scene can use it (no constraints, contacts or events) and a C compiler
+    is available; with ``required`` (--method native) a reason is raised instead of returning None."""
+    from mechsys.numeric import native
+
+    why = None
+    if c.m:
+        why = "constraints (closed loops, rolling, prescribed motions) need the projected scipy path"
+    elif c.gap_names:
+        why = "contacts need the impact event loop"
+    elif model.events:
+        why = "events need scipy's event location"
+    elif native.compiler() is None:
+        why = "no C compiler is available (set CC) or MECHSYS_NATIVE=off"
+    if why is not None:
+        if required:
+            raise AnalysisError(f"--method native: {why}; use DOP853")
+        return None
+    return native.load(model)
 
 
 def simulate(model: MechanicalModel, t_end: float, dt: float | None = None, method: str = "auto",
              rtol: float = 1e-10, atol: float = 1e-12, overrides_p: np.ndarray | None = None,
-             capture_velocity: float = 1e-10) -> SimulationResult:
-    """Integrate from the file's initial state to t_end; outputs every dt (default t_end/1000)."""
+             capture_velocity: float = 1e-10, progress=None) -> SimulationResult:
+    """Integrate from the file's initial state to t_end; outputs every dt (default t_end/1000).
+    ``progress(t)`` is called now and then with the time reached (for a progress bar)."""
     if method not in METHODS:
         raise AnalysisError(f"unknown method {method!r}; use one of {', '.join(METHODS)}")
     if t_end <= 0:
@@ -243,15 +274,19 @@ def simulate(model: MechanicalModel, t_end: float, dt: float | None = None, meth
     q0 = np.array([model.doc.initial[n] for n in model.coordinates], dtype=float)
     u0 = np.array([model.doc.initial_rate[n] for n in model.coordinates], dtype=float)
     q0, u0 = project(c, p, 0.0, q0, u0)
-    rhs = RightHandSide(c, p)
+    rhs = RightHandSide(c, p, progress)
     warnings = []
     M0, _ = c.eqs.evaluate(0.0, q0, u0, p)
     cond = np.linalg.cond(M0) if M0.size else 1.0
     if cond > 1e8:
         warnings.append(f"the mass matrix is badly conditioned (cond = {cond:.2e}): results may lose accuracy")
     chosen = method
+    t1 = time.perf_counter()
+    nat = native_integrator(model, c, required=method == "native") if method in ("auto", "native") else None
+    if nat is not None and not nat.from_cache:
+        timings["compile native"] = time.perf_counter() - t1
     if method == "auto":
-        chosen, why = choose_method(rhs, 0.0, np.concatenate([q0, u0]), t_end)
+        chosen, why = choose_method(rhs, 0.0, np.concatenate([q0, u0]), t_end, native_ok=nat is not None)
         warnings.append(f"auto method: {chosen} ({why})")
     dt = dt or t_end / 1000
     grid = np.arange(0.0, t_end + 0.5 * dt, dt)
@@ -278,10 +313,10 @@ def simulate(model: MechanicalModel, t_end: float, dt: float | None = None, meth
                 stop = stop or action == "stop"
         return stop
 
-    from scipy.integrate import solve_ivp  # imported here: the compiled path never needs it
-
     if c.m:
         # closed loops: integrate output interval by output interval and project onto the constraints
+        from scipy.integrate import solve_ivp  # imported where used: the native path never needs it
+
         y = ys[0]
         times = [0.0]
         for a, b in zip(grid[:-1], grid[1:]):
@@ -299,12 +334,21 @@ def simulate(model: MechanicalModel, t_end: float, dt: float | None = None, meth
                 note_events(sol)
         Y = np.array(ys)
         grid = np.array(times)
+    elif chosen == "native":
+        run = nat.run(p, ys[0], grid, rtol, atol, progress)
+        if run.status:
+            raise AnalysisError(f"integration failed at t = {run.t_reached:.6g}: {run.message}")
+        rhs.calls += run.nfev
+        steps = run.nsteps
+        Y = run.y
     elif c.gap_names:
         from mechsys.analysis.impacts import integrate_with_impacts
 
         grid, Y, steps, impacts, stopped = integrate_with_impacts(model, c, rhs, p, grid, ys[0], chosen, rtol, atol,
                                                                    event_fns, note_events, capture_velocity)
     else:
+        from scipy.integrate import solve_ivp
+
         sol = solve_ivp(rhs, (0.0, float(grid[-1])), ys[0], method=chosen, t_eval=grid, rtol=rtol, atol=atol,
                         events=event_fns or None)
         if not sol.success:

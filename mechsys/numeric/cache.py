@@ -47,6 +47,7 @@ def code_fingerprint() -> str:
         root = Path(__file__).resolve().parents[1]
         digest = hashlib.sha256()
         files = [f for sub in ("model", "mechanics", "numeric") for f in sorted((root / sub).glob("*.py"))]
+        files += sorted((root / "numeric").glob("*.c"))  # the native integrator template
         files.append(root / "analysis" / "simulate.py")  # it defines what a cache entry holds
         for f in files:
             digest.update(f.read_bytes())

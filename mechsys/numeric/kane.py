@@ -56,9 +56,9 @@ def equations_from_source(desc: dict) -> CompiledEquations:
     return CompiledEquations(desc["n"], [tuple(b) for b in desc["bodies"]], function_from_source(desc["source"]))
 
 
-def equations_source(model) -> dict:
-    """Cacheable description of the staged equations: sizes, body layout and generated source."""
-    n = len(model.q)
+def equation_pieces(model) -> tuple[list, list[tuple[bool, bool]]]:
+    """The staged Kane terms as one flat list of expressions and the body layout that says how to assemble them
+    (the order ``CompiledEquations.evaluate`` and the native integrator read them in)."""
     pieces: list = []
     other = model.generalized_forces.copy()
     for load in model.kin.loads:
@@ -78,5 +78,19 @@ def equations_source(model) -> dict:
         if has_inertia:
             pieces += [*Jw, *b.inertia, *frame.alpha, *w]
         layout.append((has_mass, has_inertia))
+    return pieces, layout
+
+
+def equations_source(model) -> dict:
+    """Cacheable description of the staged equations: sizes, body layout and generated source."""
+    pieces, layout = model_pieces(model)
     source = generate_source(pieces, [model.t, *model.q, *model.u, *model.parameter_symbols])
-    return {"n": n, "bodies": [list(b) for b in layout], "source": source}
+    return {"n": len(model.q), "bodies": [list(b) for b in layout], "source": source}
+
+
+def model_pieces(model) -> tuple[list, list[tuple[bool, bool]]]:
+    """``equation_pieces`` memoised on the model (the Python and the native code generators share them)."""
+    cached = getattr(model, "_equation_pieces", None)
+    if cached is None:
+        cached = model._equation_pieces = equation_pieces(model)
+    return cached

@@ -1,0 +1,223 @@
+"""Native fast path: the staged equations and a DOP853 loop generated as C, compiled once, cached, run via ctypes.
+
+Why C through the system compiler and ctypes (not numba or symengine): a cached shared library loads in about
+a millisecond, so a warm `mechsys simulate` pays neither numba's import (~0.3 s) nor its JIT of the integrator
+loop (seconds), and the whole loop (stages, assembly, LU solve, step control, dense output) runs without a
+Python call. benchmarks/simulate_anchor.py measures it. The compiler is optional: without one (or with
+MECHSYS_NATIVE=off) `auto` falls back to scipy's DOP853, which takes the same steps."""
+from __future__ import annotations
+
+import ctypes
+import os
+import shutil
+import subprocess
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable, Optional, Sequence
+
+import numpy as np
+
+from mechsys.errors import AnalysisError
+
+TEMPLATE = Path(__file__).with_name("dop853.c")
+_STATUS = {-1: "the step size became too small", -2: "the mass matrix is singular",
+           -3: "the state or its derivative is not finite", -4: "an output time lies past the end"}
+
+
+def compiler() -> Optional[str]:
+    """The C compiler to use (MECHSYS_CC, then CC, then cc/gcc/clang), or None when there is none or
+    MECHSYS_NATIVE=off."""
+    if os.environ.get("MECHSYS_NATIVE", "").lower() in ("off", "0", "false", "no"):
+        return None
+    for name in (os.environ.get("MECHSYS_CC"), os.environ.get("CC"), "cc", "gcc", "clang"):
+        if name and shutil.which(name):
+            return shutil.which(name)
+    return None
+
+
+def _c_printer(names: dict):
+    import sympy as sp
+    from sympy.printing.c import C99CodePrinter
+
+    class Printer(C99CodePrinter):
+        def _print_Symbol(self, expr):
+            return names.get(expr) or super()._print_Symbol(expr)
+
+        _print_Dummy = _print_Symbol
+
+        def _print_DiracDelta(self, expr):
+            return "0.0"  # derivative of sign(x) in |x|: zero except at the singular point itself
+
+        def _print_Mod(self, expr):
+            a, b = (self._print(x) for x in expr.args)  # Python's floored modulo, as the Python path computes
+            return f"(({a}) - ({b}) * floor(({a}) / ({b})))"
+
+        def _print_Pow(self, expr):
+            if expr.exp.is_Integer and 1 < abs(int(expr.exp)) <= 4:  # exact products, as Python's x**2 is
+                base = f"({self._print(expr.base)})"
+                prod = "*".join([base] * abs(int(expr.exp)))
+                return f"(1.0/({prod}))" if expr.exp < 0 else f"({prod})"
+            return super()._print_Pow(expr)
+
+    del sp
+    return Printer()
+
+
+def pieces_source(exprs: Sequence, t, q: Sequence, u: Sequence, params: Sequence) -> str:
+    """C function ``pieces(t, q, u, p, out)`` writing ``exprs`` into ``out`` (shared subexpressions once)."""
+    import sympy as sp
+
+    names = {t: "t", **{s: f"q[{i}]" for i, s in enumerate(q)}, **{s: f"u[{i}]" for i, s in enumerate(u)},
+             **{s: f"p[{i}]" for i, s in enumerate(params)}}
+    replacements, reduced = sp.cse([sp.sympify(e) for e in exprs], order="none")
+    for k, (sym, _) in enumerate(replacements):
+        names[sym] = f"x{k}"
+    printer = _c_printer(names)
+    lines = ["static void pieces(double t, const double *q, const double *u, const double *p, double *out) {",
+             "    (void)t; (void)q; (void)u; (void)p;"]
+    lines += [f"    const double {names[sym]} = {printer.doprint(value)};" for sym, value in replacements]
+    lines += [f"    out[{i}] = {printer.doprint(e)};" for i, e in enumerate(reduced)]
+    lines.append("}")
+    return "\n".join(lines)
+
+
+def _table(name: str, values: np.ndarray) -> str:
+    values = np.atleast_2d(values) if values.ndim == 2 else values
+    if values.ndim == 1:
+        body = ", ".join(repr(float(v)) for v in values)
+        return f"static const double {name}[{len(values)}] = {{{body}}};"
+    rows = ", ".join("{" + ", ".join(repr(float(v)) for v in row) + "}" for row in values)
+    return f"static const double {name}[{values.shape[0]}][{values.shape[1]}] = {{{rows}}};"
+
+
+def model_source(model) -> str:
+    """The complete C translation unit for one model structure."""
+    from scipy.integrate._ivp import dop853_coefficients as co
+
+    from mechsys.numeric.kane import model_pieces
+
+    pieces, layout = model_pieces(model)
+    n = len(model.q)
+    head = ["#include <math.h>", "#include <string.h>", "#ifndef M_PI", "#define M_PI 3.14159265358979323846",
+            "#endif", f"#define N {n}", f"#define NOUT {max(len(pieces), 1)}", f"#define NB {max(len(layout), 1)}",
+            "static const int LAYOUT[2 * NB] = {" + (", ".join(str(int(x)) for b in layout for x in b) or "0, 0")
+            + "};",
+            _table("A", co.A), _table("B", co.B), _table("C", co.C), _table("E3", co.E3), _table("E5", co.E5),
+            _table("D", co.D),
+            pieces_source(pieces, model.t, model.q, model.u, model.parameter_symbols)]
+    return "\n".join(head) + "\n" + TEMPLATE.read_text(encoding="utf-8")
+
+
+def build(source: str, target: Path) -> None:
+    """Compile ``source`` into the shared library ``target`` (atomically: a partial file never appears)."""
+    cc = compiler()
+    if cc is None:
+        raise AnalysisError("no C compiler found for the native integrator (set CC or use --method DOP853)")
+    target.parent.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(dir=target.parent) as tmp:
+        c_file = Path(tmp) / "model.c"
+        c_file.write_text(source, encoding="utf-8")
+        so_file = Path(tmp) / "model.so"
+        opt = "-O2" if len(source) < 2_000_000 else "-O1"
+        proc = subprocess.run([cc, opt, "-std=gnu99", "-fPIC", "-shared", "-o", str(so_file), str(c_file), "-lm"],
+                              capture_output=True, text=True)
+        if proc.returncode != 0:
+            first = (proc.stderr.strip().splitlines() or ["unknown error"])[0]
+            raise AnalysisError(f"compiling the native integrator failed: {first}")
+        os.replace(so_file, target)
+
+
+@dataclass
+class NativeRun:
+    y: np.ndarray  # (len(t_out), 2n)
+    nfev: int
+    nsteps: int
+    nrejected: int
+    status: int
+    t_reached: float
+
+    @property
+    def message(self) -> str:
+        return _STATUS.get(self.status, f"status {self.status}")
+
+
+class NativeIntegrator:
+    """A loaded model library: ``run(p, y0, t_out, rtol, atol)`` integrates with the compiled DOP853 loop."""
+
+    def __init__(self, path: Path) -> None:
+        lib = ctypes.CDLL(str(path))
+        self._lib = lib
+        dp = ctypes.POINTER(ctypes.c_double)
+        lib.mechsys_state_bytes.restype = ctypes.c_int
+        lib.mechsys_size.restype = ctypes.c_int
+        lib.mechsys_start.argtypes = [ctypes.c_void_p, ctypes.c_double, ctypes.c_double, dp, dp, ctypes.c_double,
+                                      ctypes.c_double]
+        lib.mechsys_advance.argtypes = [ctypes.c_void_p, dp, ctypes.c_int, dp, dp, ctypes.POINTER(ctypes.c_int)]
+        lib.mechsys_counters.argtypes = [ctypes.c_void_p, dp]
+        lib.mechsys_accelerations.argtypes = [ctypes.c_double, dp, dp, dp]
+        self.n = lib.mechsys_size()
+        self.from_cache = False
+        self._state_bytes = lib.mechsys_state_bytes()
+
+    @staticmethod
+    def _ptr(a: np.ndarray):
+        return a.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
+
+    def accelerations(self, t: float, y: np.ndarray, p: np.ndarray) -> np.ndarray:
+        y = np.ascontiguousarray(y, dtype=float)
+        p = np.ascontiguousarray(p, dtype=float)
+        a = np.zeros(self.n)
+        status = self._lib.mechsys_accelerations(float(t), self._ptr(y), self._ptr(p), self._ptr(a))
+        if status:
+            raise AnalysisError(f"native equations at t = {t:g}: {_STATUS.get(status, status)}")
+        return a
+
+    def run(self, p: np.ndarray, y0: np.ndarray, t_out: np.ndarray, rtol: float, atol: float,
+            progress: Optional[Callable[[float], None]] = None, chunk: int = 50) -> NativeRun:
+        """Integrate from t_out[0] to t_out[-1]; outputs at every t_out. ``progress(t)`` is called every ``chunk``
+        outputs (the loop itself never returns to Python between steps)."""
+        p = np.ascontiguousarray(p, dtype=float)
+        y0 = np.ascontiguousarray(y0, dtype=float)
+        t_out = np.ascontiguousarray(t_out, dtype=float)
+        state = ctypes.create_string_buffer(self._state_bytes)
+        Y = np.zeros((len(t_out), 2 * self.n))
+        status = self._lib.mechsys_start(state, float(t_out[0]), float(t_out[-1]), self._ptr(y0), self._ptr(p),
+                                         float(rtol), float(atol))
+        written = 0
+        done = ctypes.c_int(0)
+        while status == 0 and written < len(t_out):
+            count = min(chunk if progress else len(t_out), len(t_out) - written)
+            status = self._lib.mechsys_advance(state, self._ptr(p), count, self._ptr(t_out[written:]),
+                                               self._ptr(Y[written:]), ctypes.byref(done))
+            written += done.value
+            if progress is not None:
+                progress(float(t_out[written - 1]) if written else float(t_out[0]))
+        counters = np.zeros(4)
+        self._lib.mechsys_counters(state, self._ptr(counters))
+        return NativeRun(Y[:written], int(counters[0]), int(counters[1]), int(counters[2]), int(status),
+                         float(counters[3]))
+
+
+def load(model) -> Optional[NativeIntegrator]:
+    """The model's native integrator, from the cache or compiled now; None when the model has constraints (the
+    native loop handles M q'' = f only) or no compiler is available."""
+    from mechsys.numeric import cache
+
+    cached = getattr(model, "_native_integrator", False)
+    if cached is not False:
+        return cached
+    result = None
+    if compiler() is not None and not model.kin.constraints:
+        folder = cache.cache_dir()
+        key = cache.model_key(model, "native")
+        if folder is None:
+            folder = Path(tempfile.mkdtemp(prefix="mechsys-native-"))
+        target = folder / f"{key}.so"
+        hit = target.exists()
+        if not hit:
+            build(model_source(model), target)
+        result = NativeIntegrator(target)
+        result.from_cache = hit
+    model._native_integrator = result
+    return result

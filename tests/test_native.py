@@ -1,0 +1,142 @@
+"""The native fast path (numeric/native.py): generated C equations and the compiled DOP853 loop.
+
+The compiled loop follows scipy's DOP853 step by step, so it must reproduce `--method DOP853` to rounding, and
+its accelerations must equal the Python path's at any state, for every unconstrained model we ship."""
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+import mechsys
+from mechsys.analysis.equilibria import parameter_values
+from mechsys.analysis.simulate import RightHandSide, compile_model, simulate
+from mechsys.errors import AnalysisError
+from mechsys.numeric import native
+from tests.helpers import DATA_DIR, ROOT, SYSTEMS_DIR, load_data, load_system
+
+pytestmark = pytest.mark.skipif(native.compiler() is None, reason="no C compiler: the native path is optional")
+
+UNCONSTRAINED = [SYSTEMS_DIR / f"{n}.yaml" for n in ("double_pendulum", "cart_pendulum", "centrifuge", "motor_arm",
+                                                    "problem57", "spring_chain", "bullet_pendulum", "newton_cradle")]
+UNCONSTRAINED += [DATA_DIR / f"{n}.yaml" for n in ("torque_free_body", "two_free_bodies", "free_free_chain",
+                                                  "beads_string", "friction_sphere_3d", "p51_racket", "stiff_chain")]
+
+
+def _initial(model):
+    q0 = np.array([model.doc.initial[n] for n in model.coordinates], dtype=float)
+    u0 = np.array([model.doc.initial_rate[n] for n in model.coordinates], dtype=float)
+    return np.concatenate([q0, u0])
+
+
+@pytest.mark.parametrize("path", UNCONSTRAINED, ids=lambda p: p.stem)
+def test_native_accelerations_equal_python_path(path):
+    """The C translation of the staged Kane terms (CSE, C printer, assembly, LU) gives the Python path's q''."""
+    model = mechsys.load(path)
+    nat = native.load(model)
+    rhs = RightHandSide(compile_model(model), parameter_values(model))
+    rng = np.random.default_rng(7)
+    n = len(model.q)
+    for _ in range(5):
+        y = rng.uniform(-1.5, 1.5, 2 * n)
+        t = float(rng.uniform(0, 3))
+        expected = rhs(t, y)[n:]
+        got = nat.accelerations(t, y, rhs.p)
+        assert np.allclose(got, expected, rtol=1e-11, atol=1e-11 * (1 + np.max(np.abs(expected))))
+
+
+@pytest.mark.parametrize("name,t_end", [("double_pendulum", 10.0), ("centrifuge", 5.0), ("spring_chain", 5.0)])
+def test_native_takes_scipys_dop853_steps(name, t_end):
+    """Same step-size control, initial step and dense output as scipy's DOP853: same states to rounding."""
+    model = load_system(name)
+    c = compile_model(model)
+    p = parameter_values(model)
+    y0 = _initial(model)
+    grid = np.linspace(0.0, t_end, 501)
+    run = native.load(model).run(p, y0, grid, 1e-10, 1e-12)
+    sol = solve_ivp(RightHandSide(c, p), (0.0, t_end), y0, method="DOP853", t_eval=grid, rtol=1e-10, atol=1e-12)
+    assert run.status == 0 and len(run.y) == len(grid)
+    scale = 1 + np.max(np.abs(sol.y))
+    assert np.max(np.abs(run.y - sol.y.T)) < 1e-10 * scale
+    assert abs(run.nfev - sol.nfev) <= 3  # scipy counts the dense-output stages the same way
+
+
+def test_native_3d_body_conserves_energy_and_matches_reference():
+    """A torque-free asymmetric body (gyroscopic terms, full inertia): energy drift tiny, state = tight DOP853."""
+    model = load_data("torque_free_body")
+    r = simulate(model, 20.0, method="native")
+    ref = simulate(model, 20.0, method="DOP853", rtol=1e-13, atol=1e-14)
+    assert r.method == "native"
+    assert r.energy_drift < 1e-9
+    assert np.max(np.abs(r.q - ref.q)) < 1e-7
+
+
+def test_double_pendulum_within_1e_6_of_tight_reference_for_2_s_native():
+    """Issue 4's accuracy check, on the compiled path at default settings."""
+    model = load_system("double_pendulum")
+    r = simulate(model, 2.0, method="native")
+    ref = simulate(model, 2.0, method="DOP853", rtol=1e-13, atol=1e-14)
+    assert np.max(np.abs(np.hstack([r.q - ref.q, r.u - ref.u]))) < 1e-6
+
+
+def test_auto_picks_native_for_a_non_stiff_open_chain_and_radau_for_the_stiff_chain():
+    assert simulate(load_system("double_pendulum"), 1.0).method == "native"
+    assert simulate(load_data("stiff_chain"), 10.0).method == "Radau"
+
+
+def test_native_refuses_constrained_scenes_with_a_reason():
+    with pytest.raises(AnalysisError, match="constraints"):
+        simulate(load_system("four_bar"), 1.0, method="native")
+    with pytest.raises(AnalysisError, match="contacts"):
+        simulate(load_system("bouncing_ball"), 1.0, method="native")
+    with pytest.raises(AnalysisError, match="events"):
+        simulate(load_data("falling_events"), 1.0, method="native")
+
+
+@pytest.mark.parametrize("method", ["native", "DOP853"])
+def test_singular_mass_matrix_is_reported(tmp_path, method):
+    """A coordinate that carries no mass: the compiled loop stops with the reason, not garbage."""
+    f = tmp_path / "massless.yaml"
+    f.write_text("""
+name: massless
+parameters: {m: 1.0}
+coordinates: {x: {initial: 0.0, rate: 1.0}, y: {initial: 0.0}}
+links:
+  a: {particle: true, joint: {type: prismatic, parent: ground, axis: x, coordinate: x}, mass: m}
+  b: {particle: true, joint: {type: prismatic, parent: a, axis: y, coordinate: y}, mass: 0}
+""")
+    model = mechsys.load(f)
+    with pytest.raises(AnalysisError, match="singular"):
+        simulate(model, 1.0, method=method)
+
+
+def test_progress_callback_reports_increasing_times():
+    seen = []
+    simulate(load_system("double_pendulum"), 5.0, method="native", progress=seen.append)
+    assert len(seen) >= 5 and seen == sorted(seen) and seen[-1] == pytest.approx(5.0)
+
+
+def test_without_a_compiler_auto_falls_back_to_scipy(tmp_path):
+    env = {**os.environ, "MECHSYS_NATIVE": "off", "MECHSYS_CACHE": str(tmp_path)}
+    out = tmp_path / "r.json"
+    proc = subprocess.run([sys.executable, "-m", "mechsys", "simulate", str(SYSTEMS_DIR / "double_pendulum.yaml"),
+                           "--t-end", "1", "-o", str(out), "-f", "json"], capture_output=True, text=True, env=env,
+                          cwd=ROOT)
+    assert proc.returncode == 0, proc.stderr
+    assert "DOP853" in proc.stdout
+    assert json.loads(out.read_text())["columns"][0] == "t"
+
+
+def test_native_library_is_cached_between_processes(tmp_path):
+    env = {**os.environ, "MECHSYS_CACHE": str(tmp_path)}
+    cmd = [sys.executable, "-m", "mechsys", "simulate", str(SYSTEMS_DIR / "double_pendulum.yaml"), "--t-end", "1"]
+    first = subprocess.run(cmd, capture_output=True, text=True, env=env, cwd=ROOT)
+    second = subprocess.run(cmd, capture_output=True, text=True, env=env, cwd=ROOT)
+    assert first.returncode == 0 and second.returncode == 0
+    assert "compile native" in first.stdout and "compile native" not in second.stdout
+    assert list(tmp_path.glob("*.so"))
