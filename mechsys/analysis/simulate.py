@@ -4,15 +4,16 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field
 
-import numpy as np
-import sympy as sp
+from typing import TYPE_CHECKING
 
-from mechsys.analysis.equilibria import parameter_values
+import numpy as np
+
 from mechsys.errors import AnalysisError
-from mechsys.mechanics.model import MechanicalModel
+
+if TYPE_CHECKING:  # sympy and the model are imported only where used: a warm run (analysis/warm.py) needs neither
+    from mechsys.mechanics.model import MechanicalModel
 
 METHODS = ("auto", "native", "RK45", "DOP853", "Radau", "BDF", "LSODA")
-NATIVE_NOTE = "native: scipy's DOP853 step by step, with the whole loop compiled (numeric/native.py)"
 
 
 @dataclass
@@ -39,6 +40,8 @@ class Compiled:
 
 def _contact_sources(model: MechanicalModel, args) -> dict:
     """Gap functions of the contacts and the rows a captured (persistent) contact adds: A_c q'' = b_c."""
+    import sympy as sp
+
     from mechsys.numeric.lambdify import matrix_source
 
     gap_contacts = [c for c in model.kin.contacts if c["gap"] is not None]
@@ -59,6 +62,8 @@ def compile_model(model: MechanicalModel) -> Compiled:
     cached = getattr(model, "_simulation_compiled", None)
     if cached is not None:
         return cached
+    import sympy as sp
+
     from mechsys.numeric import cache
     from mechsys.numeric.kane import equations_from_source, equations_source
     from mechsys.numeric.lambdify import matrix_from_source, matrix_source
@@ -265,6 +270,8 @@ def simulate(model: MechanicalModel, t_end: float, dt: float | None = None, meth
         raise AnalysisError(f"unknown method {method!r}; use one of {', '.join(METHODS)}")
     if t_end <= 0:
         raise AnalysisError("--t-end must be positive")
+    from mechsys.analysis.equilibria import parameter_values
+
     timings = {}
     t0 = time.perf_counter()
     c = compile_model(model)

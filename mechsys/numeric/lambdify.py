@@ -4,13 +4,15 @@ sympy.lambdify walks the whole (unshared) expression tree several times to find 
 dominates for the long expressions of a chain; here CSE runs once and only its small results are printed."""
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass
 from typing import Callable, Sequence
 
-import numpy as np
 import sympy as sp
 from sympy.printing.pycode import PythonCodePrinter
+
+from mechsys.numeric.runtime import StateFunction, function_from_source, matrix_from_source
+
+__all__ = ["generate_source", "compile_exprs", "matrix_source", "compile_matrix", "function_from_source",
+           "matrix_from_source", "StateFunction"]
 
 
 class _Printer(PythonCodePrinter):
@@ -44,31 +46,9 @@ def generate_source(exprs: Sequence[sp.Expr], args: Sequence[sp.Symbol]) -> str:
     return "\n".join(lines)
 
 
-def function_from_source(source: str) -> Callable[..., list[float]]:
-    """The function defined by generated source (printed by sympy from parsed expressions, or read back from
-    mechsys's own cache): no user text reaches it."""
-    namespace: dict = {"math": math}
-    exec(compile(source, "<mechsys-generated>", "exec"), namespace)  # noqa: S102
-    return namespace["_f"]
-
-
 def compile_exprs(exprs: Sequence[sp.Expr], args: Sequence[sp.Symbol]) -> Callable[..., list[float]]:
     """A function of ``args`` returning the list of ``exprs`` as floats (shared subexpressions computed once)."""
     return function_from_source(generate_source(exprs, args))
-
-
-@dataclass
-class StateFunction:
-    """``fn(t, q, u, p)`` evaluating a symbolic matrix at numeric arrays; shape is the matrix shape."""
-
-    shape: tuple[int, int]
-    _fn: Callable[..., list[float]]
-
-    def __call__(self, t: float, q: Sequence[float], u: Sequence[float], p: Sequence[float]) -> np.ndarray:
-        if self.shape[0] == 0 or self.shape[1] == 0:
-            return np.zeros(self.shape)
-        out = self._fn(t, *q, *u, *p)
-        return np.array(out, dtype=float).reshape(self.shape)
 
 
 def matrix_source(expr: sp.Matrix, t: sp.Symbol, q: Sequence[sp.Symbol], u: Sequence[sp.Symbol],
@@ -77,13 +57,6 @@ def matrix_source(expr: sp.Matrix, t: sp.Symbol, q: Sequence[sp.Symbol], u: Sequ
     expr = sp.Matrix(expr)
     empty = expr.shape[0] == 0 or expr.shape[1] == 0
     return {"shape": list(expr.shape), "source": None if empty else generate_source(list(expr), [t, *q, *u, *params])}
-
-
-def matrix_from_source(desc: dict) -> StateFunction:
-    shape = tuple(desc["shape"])
-    if desc["source"] is None:
-        return StateFunction(shape, lambda *a: [])
-    return StateFunction(shape, function_from_source(desc["source"]))
 
 
 def compile_matrix(expr: sp.Matrix, t: sp.Symbol, q: Sequence[sp.Symbol], u: Sequence[sp.Symbol],

@@ -148,6 +148,7 @@ class NativeIntegrator:
     def __init__(self, path: Path) -> None:
         lib = ctypes.CDLL(str(path))
         self._lib = lib
+        self.path = Path(path)
         dp = ctypes.POINTER(ctypes.c_double)
         lib.mechsys_state_bytes.restype = ctypes.c_int
         lib.mechsys_size.restype = ctypes.c_int

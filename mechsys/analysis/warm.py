@@ -1,0 +1,103 @@
+"""Warm start for `mechsys simulate`: a run plan keyed by the file's bytes and `--set` options, so a repeated run
+skips sympy, pydantic and scipy and goes straight to the cached native integrator.
+
+The plan holds only what the native path reads: coordinate names, parameter and initial values, the fastest
+decay rate (auto's stiffness decision is redone for the new t_end), the generated source of T and V, and the
+path of the compiled library. Any change to the file, the options, mechsys or its code gives a new key; a
+missing library or a damaged plan falls back to the full (cold) path, which writes the plan again."""
+from __future__ import annotations
+
+import hashlib
+import json
+import time
+from pathlib import Path
+from typing import Callable, Optional, Sequence
+
+import numpy as np
+
+from mechsys.analysis.simulate import SimulationResult
+from mechsys.numeric import cache
+
+STIFF_STEPS = 5e4  # the same threshold as simulate.choose_method
+
+
+def plan_key(path: Path, overrides: Sequence[str]) -> Optional[str]:
+    """Key of the run plan for this exact file content and options; None when caching is off or unreadable."""
+    if cache.cache_dir() is None:
+        return None
+    try:
+        data = Path(path).read_bytes()
+    except OSError:
+        return None
+    from mechsys import __version__
+
+    digest = hashlib.sha256(data)
+    digest.update(json.dumps({"set": list(overrides), "version": __version__, "code": cache.code_fingerprint(),
+                              "what": "simulate-plan"}, sort_keys=True).encode())
+    return digest.hexdigest()[:32]
+
+
+def run_planned(path: Path, overrides: Sequence[str], t_end: float, dt: Optional[float], method: str,
+                rtol: float, atol: float, progress: Optional[Callable[[float], None]] = None
+                ) -> Optional[SimulationResult]:
+    """The simulation from a stored plan, or None when there is no usable plan for this run (the caller then
+    loads the model and runs `simulate`)."""
+    if method not in ("auto", "native") or t_end <= 0:
+        return None
+    key = plan_key(path, overrides)
+    plan = cache.load(key) if key else None
+    if not plan or not Path(plan.get("library", "")).exists():
+        return None
+    if method == "auto" and plan["decay_rate"] * t_end > STIFF_STEPS:
+        return None  # stiff over this horizon: the full path chooses an implicit method
+    from mechsys.numeric.native import NativeIntegrator
+    from mechsys.numeric.runtime import matrix_from_source
+
+    t0 = time.perf_counter()
+    try:
+        nat = NativeIntegrator(Path(plan["library"]))
+        T_fn, V_fn = matrix_from_source(plan["T"]), matrix_from_source(plan["V"])
+    except (OSError, KeyError, SyntaxError):
+        return None
+    p = np.array(plan["parameters"], dtype=float)
+    y0 = np.array(plan["initial"], dtype=float)
+    n = len(plan["coordinates"])
+    load_seconds = time.perf_counter() - t0
+    dt = dt or t_end / 1000
+    grid = np.arange(0.0, t_end + 0.5 * dt, dt)
+    grid[-1] = min(grid[-1], t_end)
+    t1 = time.perf_counter()
+    run = nat.run(p, y0, grid, rtol, atol, progress)
+    if run.status:
+        return None  # let the full path report the failure with its context
+    seconds = time.perf_counter() - t1
+    q, u = run.y[:, :n], run.y[:, n:]
+    T = np.array([T_fn(t, qi, ui, p)[0, 0] for t, qi, ui in zip(grid, q, u)])
+    V = np.array([V_fn(t, qi, ui, p)[0, 0] for t, qi, ui in zip(grid, q, u)])
+    warnings = list(plan["warnings"])
+    if method == "auto":
+        warnings.append(f"auto method: native (non-stiff: fastest decay rate {plan['decay_rate']:.3g} 1/s)")
+    timings = {"load compiled code (warm plan)": load_seconds, "integrate": seconds}
+    return SimulationResult(list(plan["coordinates"]), grid, q, u, T, V, np.zeros(len(grid)), "native",
+                            run.nfev + (2 * n + 1 if method == "auto" else 0), run.nsteps, timings, warnings)
+
+
+def remember(path: Path, overrides: Sequence[str], model, result: SimulationResult) -> None:
+    """Store the plan of a native run so the next identical run starts warm (no-op for other methods)."""
+    key = plan_key(path, overrides)
+    if key is None or result.method != "native" or model.kin.constraints or model.events or model.kin.contacts:
+        return
+    from mechsys.analysis.equilibria import parameter_values
+    from mechsys.analysis.simulate import RightHandSide, compile_model, stiffness
+
+    nat = getattr(model, "_native_integrator", None)
+    entry = cache.load(cache.model_key(model, "simulate"))
+    if nat is None or entry is None:
+        return
+    p = parameter_values(model)
+    y0 = np.concatenate([result.q[0], result.u[0]])
+    radius, _ = stiffness(RightHandSide(compile_model(model), p), 0.0, y0, 1.0)
+    cache.store(key, {"coordinates": list(model.coordinates), "parameters": [float(x) for x in p],
+                      "initial": [float(x) for x in y0], "decay_rate": radius, "library": str(nat.path),
+                      "T": entry["T"], "V": entry["V"],
+                      "warnings": [w for w in result.warnings if not w.startswith("auto method")]})

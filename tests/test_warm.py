@@ -1,0 +1,85 @@
+"""Warm start of `mechsys simulate` (analysis/warm.py): a repeated run reuses a plan keyed by the file's bytes and
+options, gives byte-identical results, and never imports sympy, pydantic's model or scipy.integrate."""
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+
+import pytest
+
+from mechsys.numeric import native
+from tests.helpers import ROOT, SYSTEMS_DIR
+
+pytestmark = pytest.mark.skipif(native.compiler() is None, reason="the warm plan needs the native path")
+
+PROBE = """
+import sys
+from mechsys.cli import main
+try:
+    main()
+except SystemExit as exc:
+    code = exc.code
+print("MODULES", "sympy" in sys.modules, "scipy.integrate" in sys.modules, "mechsys.model.schema" in sys.modules,
+      file=sys.stderr)
+sys.exit(code)
+"""
+
+
+def _run(tmp_path, *args, cache=None):
+    env = {**os.environ, "MECHSYS_CACHE": str(cache or tmp_path / "cache")}
+    proc = subprocess.run([sys.executable, "-c", PROBE, "simulate", *map(str, args)], capture_output=True,
+                          text=True, env=env, cwd=ROOT)
+    assert proc.returncode == 0, proc.stderr
+    line = [x for x in proc.stderr.splitlines() if x.startswith("MODULES")][-1]
+    return proc.stdout, line.split()[1:] == ["False", "False", "False"]
+
+
+def test_second_run_is_warm_identical_and_imports_no_sympy(tmp_path):
+    model = tmp_path / "dp.yaml"
+    shutil.copy(SYSTEMS_DIR / "double_pendulum.yaml", model)
+    out1, out2 = tmp_path / "a.csv", tmp_path / "b.csv"
+    first, light1 = _run(tmp_path, model, "--t-end", "3", "-o", out1)
+    second, light2 = _run(tmp_path, model, "--t-end", "3", "-o", out2)
+    assert not light1 and "warm plan" not in first
+    assert light2 and "warm plan" in second
+    assert out1.read_bytes() == out2.read_bytes()
+    # a different horizon and output grid reuse the same plan
+    third, light3 = _run(tmp_path, model, "--t-end", "1", "--dt", "0.01")
+    assert light3 and "warm plan" in third
+
+
+def test_plan_follows_the_file_and_the_options(tmp_path):
+    model = tmp_path / "dp.yaml"
+    shutil.copy(SYSTEMS_DIR / "double_pendulum.yaml", model)
+    a, b, c = tmp_path / "a.csv", tmp_path / "b.csv", tmp_path / "c.csv"
+    _run(tmp_path, model, "--t-end", "1", "-o", a)
+    _, warm_set = _run(tmp_path, model, "--t-end", "1", "--set", "g=1.62", "-o", b)
+    assert not warm_set  # new options: a new plan, built by the full path
+    assert a.read_bytes() != b.read_bytes()
+    _, warm_again = _run(tmp_path, model, "--t-end", "1", "--set", "g=1.62", "-o", c)
+    assert warm_again and b.read_bytes() == c.read_bytes()
+    model.write_text(model.read_text().replace("\n", "\n# edited\n", 1))
+    _, warm_edit = _run(tmp_path, model, "--t-end", "1")
+    assert not warm_edit  # any change to the file's bytes invalidates the plan
+
+
+def test_options_that_need_the_model_take_the_full_path(tmp_path):
+    model = SYSTEMS_DIR / "double_pendulum.yaml"
+    _run(tmp_path, model, "--t-end", "1")
+    _, light = _run(tmp_path, model, "--t-end", "1", "--method", "DOP853")
+    assert not light
+    _, light = _run(tmp_path, model, "--t-end", "1", "--reactions", "-o", tmp_path / "r.csv")
+    assert not light
+
+
+def test_stiff_horizon_is_not_run_from_the_plan(tmp_path):
+    """auto's stiffness decision depends on t_end: the plan keeps the decay rate and redoes it."""
+    model = ROOT / "tests" / "data" / "stiff_chain.yaml"
+    first, _ = _run(tmp_path, model, "--t-end", "0.01")
+    assert "native" in first
+    _, light_short = _run(tmp_path, model, "--t-end", "0.01")
+    assert light_short
+    long_run, light_long = _run(tmp_path, model, "--t-end", "10", "--dt", "0.1")
+    assert not light_long and "Radau" in long_run
