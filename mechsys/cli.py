@@ -357,15 +357,21 @@ def simulate(
     t_end: float = typer.Option(10.0, "--t-end", help="End time [s]."),
     dt: Optional[float] = typer.Option(None, "--dt", help="Output interval [s] (default t_end/1000)."),
     method: str = typer.Option("auto", "--method", "-m",
-                               help="auto (stiffness check), RK45, DOP853, Radau, BDF or LSODA."),
+                               help="auto (stiffness check), native (compiled DOP853), RK45, DOP853, Radau, "
+                                    "BDF or LSODA."),
     rtol: float = typer.Option(1e-10, "--rtol", help="Relative tolerance."),
     atol: float = typer.Option(1e-12, "--atol", help="Absolute tolerance."),
-    output: Optional[Path] = typer.Option(None, "--output", "-o", help="Result file: .csv or .json (atomic)."),
+    output: Optional[Path] = typer.Option(None, "--output", "-o",
+                                          help="Result file: .csv, .json or .parquet (atomic)."),
     plot: Optional[Path] = typer.Option(None, "--plot", help="Time histories, phase portrait, energy (.png/.svg)."),
+    animate: Optional[Path] = typer.Option(None, "--animate", help="Animated GIF of a planar mechanism (atomic)."),
+    fps: Optional[float] = typer.Option(None, "--fps", help="Frames per second of --animate (default: real time)."),
     events_file: Optional[Path] = typer.Option(None, "--events", help="Write the recorded events (.csv or .json)."),
     impacts_file: Optional[Path] = typer.Option(None, "--impacts", help="Write the impact table (.csv or .json)."),
     capture: float = typer.Option(1e-10, "--capture-velocity",
                                   help="Rest rule: slower impacts are plastic and the contact stays closed."),
+    reactions: bool = typer.Option(False, "--reactions",
+                                   help="Add joint reactions reaction(LINK).Fx..Mz (ground axes) to the result file."),
     fmt: TableFormat = typer.Option(TableFormat.text, "--format", "-f", help="Format of the summary."),
     set_: Optional[List[str]] = SetOption,
 ) -> None:
@@ -375,23 +381,44 @@ def simulate(
         import time as _time
 
         from mechsys.analysis.simulate import simulate as run_simulation
-        from mechsys.report.simulation import plot_histories, result_text, summary_table
+        from mechsys.report.simulation import check_result_path, plot_histories, summary_table, write_result
 
         if output is not None:
-            result_text([], __import__("numpy").zeros((0, 0)), output.suffix)  # reject a bad suffix first
-        t0 = _time.perf_counter()
-        import mechsys
-        from mechsys.model.load import parse_assignments
+            check_result_path(output)  # reject a bad suffix (or Parquet without pyarrow) first
+        if animate is not None:
+            from mechsys.report.animation import check_animation_path, write_animation
 
-        # prescribed coordinates are released into drive constraints so their driving forces are outputs
-        model = mechsys.load(file, parse_assignments(set_), release_prescribed=True)
-        result = run_simulation(model, t_end, dt, method, rtol, atol, capture_velocity=capture)
+            check_animation_path(animate, fps)
+        t0 = _time.perf_counter()
+        from mechsys.analysis import warm
+        from mechsys.report.progress import ProgressBar
+
+        bar = ProgressBar(t_end)
+        # a repeated run of the same file and options starts warm (no sympy, no scipy), unless an option needs
+        # the symbolic model
+        result = None if (animate or reactions) else warm.run_planned(file, set_ or [], t_end, dt, method, rtol,
+                                                                       atol, bar)
+        if result is None:
+            import mechsys
+            from mechsys.model.load import parse_assignments
+
+            # prescribed coordinates are released into drive constraints so their driving forces are outputs
+            model = mechsys.load(file, parse_assignments(set_), release_prescribed=True)
+            result = run_simulation(model, t_end, dt, method, rtol, atol, capture_velocity=capture, progress=bar)
+            warm.remember(file, set_ or [], model, result)
+        bar.close()
         result.timings = {"load": _time.perf_counter() - t0 - sum(result.timings.values()), **result.timings}
         names, data = result.columns()
+        if animate is not None:  # first: a non-planar model fails before any other file is written
+            write_animation(model, result, animate, fps, source=file)
+        if reactions:
+            from mechsys.analysis.reactions import append_reactions
+
+            names, data = append_reactions(model, result, names, data, output)
         if output is not None:
-            write_atomic(output, result_text(names, data, output.suffix))
+            write_result(output, names, data)
         if plot is not None:
-            plot_histories(names, data, str(plot))
+            plot_histories(*result.columns(), str(plot))
         if impacts_file is not None:
             from mechsys.report.simulation import impacts_text
 
@@ -450,7 +477,7 @@ def bench(
 
 @app.command("plot")
 def plot_result(
-    result: Path = typer.Argument(..., help="A result file written by `mechsys simulate` (.csv or .json)."),
+    result: Path = typer.Argument(..., help="A result file written by `mechsys simulate` (.csv, .json, .parquet)."),
     output: Path = typer.Option(..., "--output", "-o", help="Figure file (.png, .svg, .pdf)."),
 ) -> None:
     """Plot a simulation result (time histories, rates, energy, phase portrait) or a sweep table of equilibria
@@ -473,16 +500,18 @@ def plot_result(
 
 @app.command("export")
 def export_result(
-    result: Path = typer.Argument(..., help="A result file written by `mechsys simulate` (.csv or .json)."),
-    output: Path = typer.Option(..., "--output", "-o", help="Converted file (.csv or .json), written atomically."),
+    result: Path = typer.Argument(..., help="A result file written by `mechsys simulate` (.csv, .json, .parquet)."),
+    output: Path = typer.Option(..., "--output", "-o",
+                                help="Converted file (.csv, .json or .parquet), written atomically."),
 ) -> None:
-    """Convert a simulation result between CSV and JSON."""
+    """Convert a simulation result between CSV, JSON and Parquet."""
 
     def body() -> int:
-        from mechsys.report.simulation import read_result, result_text
+        from mechsys.report.simulation import check_result_path, read_result, write_result
 
+        check_result_path(output)
         names, data = read_result(result)
-        write_atomic(output, result_text(names, data, output.suffix))
+        write_result(output, names, data)
         return 0
 
     run(body)
@@ -520,16 +549,25 @@ def collide(
         rates = Table("velocities", ["coordinate", "before", "after"])
         for c, a, b in zip(result.coordinates, result.rates_before, result.rates_after):
             rates.add(f"der({c})", float(a), float(b))
-        contacts = Table("contacts", ["contact", "normal velocity before", "after", "impulse"])
+        contacts = Table("contacts", ["contact", "normal velocity before", "after", "impulse", "tangential impulse",
+                                      "mode"])
+        tangential = result.to_dict()["tangential_impulse"]
+        tangential = [tangential] if len(result.contacts) == 1 else tangential
         for k, name in enumerate(result.contacts):
             contacts.add(name, float(result.normal_velocity_before[k]), float(result.normal_velocity_after[k]),
-                         float(result.impulses[k]))
+                         float(result.impulses[k]), ", ".join(f"{x:.7g}" for x in tangential[k]),
+                         result.modes[k] or "-")
         joints = Table("joint impulses on each link from its parent (ground axes)", ["link", "x", "y", "z"])
         for name, vec in result.joint_impulses.items():
             joints.add(name, *vec)
         energy = Table("kinetic energy", ["before", "after", "lost"])
         energy.add(result.energy_before, result.energy_after, result.energy_loss)
-        emit_tables([rates, contacts, joints, energy], fmt, output, result.to_dict())
+        tables = [rates, contacts, joints, energy]
+        if result.restitution_factor < 1:
+            note = Table("restitution lowered (friction would otherwise create energy)", ["factor on e"])
+            note.add(result.restitution_factor)
+            tables.append(note)
+        emit_tables(tables, fmt, output, result.to_dict())
         return 0
 
     run(body)

@@ -1,4 +1,4 @@
-"""Simulation outputs: result files (CSV, JSON by suffix), the run summary table and time-history plots."""
+"""Simulation outputs: result files (CSV, JSON, Parquet by suffix), the run summary table and time-history plots."""
 from __future__ import annotations
 
 import json
@@ -10,13 +10,57 @@ from mechsys.errors import InputError
 from mechsys.report.tables import Table
 
 
+RESULT_SUFFIXES = ".csv, .json or .parquet"
+
+
 def result_text(names: list[str], data: np.ndarray, suffix: str) -> str:
     if suffix == ".json":
         return json.dumps({"columns": names, "data": data.tolist()}) + "\n"
     if suffix in (".csv", ""):
         lines = [",".join(names)] + [",".join(repr(float(x)) for x in row) for row in data]
         return "\n".join(lines) + "\n"
-    raise InputError(f"unsupported result file suffix {suffix!r} (use .csv or .json)")
+    raise InputError(f"unsupported result file suffix {suffix!r} (use {RESULT_SUFFIXES})")
+
+
+def _pyarrow(path: Path | None, action: str):
+    """pyarrow and pyarrow.parquet, or a one-line input error naming the extra that installs them."""
+    try:
+        import pyarrow
+        import pyarrow.parquet as pq
+    except ImportError:
+        where = f"{path}: " if path is not None else ""
+        raise InputError(f"{where}{action} Parquet needs pyarrow: pip install mechsys[parquet] "
+                         "(or use .csv or .json)") from None
+    return pyarrow, pq
+
+
+def check_result_path(path: Path) -> None:
+    """Reject a result file name before any work: unknown suffix, or Parquet without pyarrow installed."""
+    path = Path(path)
+    if path.suffix.lower() == ".parquet":
+        _pyarrow(path, "writing")
+    else:
+        result_text([], np.zeros((0, 0)), path.suffix)
+
+
+def result_bytes(names: list[str], data: np.ndarray, suffix: str) -> bytes:
+    """The result file's content: Parquet (one float64 column per name) for .parquet, else result_text."""
+    if suffix.lower() != ".parquet":
+        return result_text(names, data, suffix).encode("utf-8")
+    pa, pq = _pyarrow(None, "writing")
+    data = np.asarray(data, dtype=float).reshape(-1, len(names))
+    table = pa.table({name: pa.array(data[:, k], type=pa.float64()) for k, name in enumerate(names)})
+    sink = pa.BufferOutputStream()
+    pq.write_table(table, sink)
+    return sink.getvalue().to_pybytes()
+
+
+def write_result(path: Path, names: list[str], data: np.ndarray) -> None:
+    """Write a result file atomically, its format chosen by the suffix (.csv, .json, .parquet)."""
+    from mechsys.report.files import atomic_write
+
+    content = result_bytes(names, data, Path(path).suffix)
+    atomic_write(Path(path), lambda tmp: Path(tmp).write_bytes(content))
 
 
 def plot_sweep_table(path: Path, out: str) -> None:
@@ -59,7 +103,9 @@ def plot_sweep_table(path: Path, out: str) -> None:
 
 
 def read_result(path: Path) -> tuple[list[str], np.ndarray]:
-    """Read a result file written by `mechsys simulate` (CSV or JSON)."""
+    """Read a result file written by `mechsys simulate` (CSV, JSON or Parquet)."""
+    if Path(path).suffix.lower() == ".parquet":
+        return _read_parquet(Path(path))
     try:
         text = Path(path).read_text(encoding="utf-8")
     except OSError as exc:
@@ -76,6 +122,21 @@ def read_result(path: Path) -> tuple[list[str], np.ndarray]:
         return names, data
     except (ValueError, KeyError, IndexError, json.JSONDecodeError):
         raise InputError(f"{path}: not a mechsys result file (CSV with a header row, or JSON)") from None
+
+
+def _read_parquet(path: Path) -> tuple[list[str], np.ndarray]:
+    pa, pq = _pyarrow(path, "reading")
+    if not path.is_file():
+        raise InputError(f"{path}: cannot read (No such file or directory)")
+    try:
+        table = pq.read_table(path)
+        names = [str(n) for n in table.column_names]
+        columns = [np.asarray(table.column(k).to_numpy(), dtype=float) for k in range(table.num_columns)]
+    except (OSError, ValueError, TypeError, pa.ArrowException):
+        raise InputError(f"{path}: not a mechsys result file (Parquet with numeric columns)") from None
+    if not names:
+        raise InputError(f"{path}: not a mechsys result file (the Parquet table has no columns)")
+    return names, np.column_stack(columns) if columns[0].size else np.zeros((0, len(names)))
 
 
 def summary_table(result) -> list[Table]:
