@@ -437,7 +437,7 @@ def simulate(
 def bench(
     file: Path = typer.Argument(..., help="Model file (YAML)."),
     t_end: float = typer.Option(5.0, "--t-end", help="Horizon [s] (inside the predictability horizon)."),
-    methods: str = typer.Option("RK45,DOP853,Radau,LSODA", "--methods", help="Comma-separated methods."),
+    methods: str = typer.Option("native,RK45,DOP853,Radau,LSODA", "--methods", help="Comma-separated methods."),
     rtols: str = typer.Option("1e-4,1e-6,1e-8,1e-10", "--rtols", help="Comma-separated relative tolerances."),
     plot: Optional[Path] = typer.Option(None, "--plot", help="Work-precision diagram (.png/.svg)."),
     fmt: TableFormat = typer.Option(TableFormat.text, "--format", "-f", help="Output format."),

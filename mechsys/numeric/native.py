@@ -91,12 +91,28 @@ def _table(name: str, values: np.ndarray) -> str:
     return f"static const double {name}[{values.shape[0]}][{values.shape[1]}] = {{{rows}}};"
 
 
+def _dop853_coefficients():
+    """scipy's DOP853 tables (Hairer's), read from their module file: importing them through the package would
+    import all of scipy.integrate (~0.5 s of a cold run) for a few arrays."""
+    import importlib.util
+
+    spec = importlib.util.find_spec("scipy")
+    if spec and spec.origin:
+        path = Path(spec.origin).parent / "integrate" / "_ivp" / "dop853_coefficients.py"
+        if path.exists():
+            namespace: dict = {}
+            exec(compile(path.read_text(encoding="utf-8"), str(path), "exec"), namespace)  # noqa: S102
+            return type("Tables", (), namespace)
+    from scipy.integrate._ivp import dop853_coefficients
+
+    return dop853_coefficients
+
+
 def model_source(model) -> str:
     """The complete C translation unit for one model structure."""
-    from scipy.integrate._ivp import dop853_coefficients as co
-
     from mechsys.numeric.kane import model_pieces
 
+    co = _dop853_coefficients()
     pieces, layout = model_pieces(model)
     n = len(model.q)
     head = ["#include <math.h>", "#include <string.h>", "#ifndef M_PI", "#define M_PI 3.14159265358979323846",
