@@ -1,4 +1,4 @@
-"""Impacts by impulse-momentum: M (u+ - u-) = J^T U + A^T Lambda, Newton's restitution on the normal velocities."""
+"""Impacts by impulse-momentum: M (u+ - u-) = J^T U + A^T Lambda, Newton's restitution, Coulomb friction."""
 from __future__ import annotations
 
 import itertools
@@ -25,32 +25,47 @@ class ImpactResult:
     joint_impulses: dict[str, list[float]] = field(default_factory=dict)
     energy_before: float = 0.0
     energy_after: float = 0.0
+    tangential_impulses: np.ndarray | None = None  # (contacts, 3): friction impulse on the first side, ground axes
+    modes: list[str | None] = field(default_factory=list)  # "stick" | "slip" per contact; None without impulse
+    restitution_factor: float = 1.0  # < 1 when e was lowered so that friction does not create energy
 
     @property
     def energy_loss(self) -> float:
         return self.energy_before - self.energy_after
 
     def to_dict(self) -> dict:
-        impulse = float(self.impulses[0]) if len(self.impulses) == 1 else [float(x) for x in self.impulses]
+        single = len(self.impulses) == 1
+        impulse = float(self.impulses[0]) if single else [float(x) for x in self.impulses]
+        tangential = [[float(x) for x in row] for row in self._tangential()]
         return {"rates_after": {c: float(v) for c, v in zip(self.coordinates, self.rates_after)},
                 "rates_before": {c: float(v) for c, v in zip(self.coordinates, self.rates_before)},
                 "impulse": impulse, "contacts": self.contacts,
+                "tangential_impulse": tangential[0] if single else tangential,
+                "mode": (self.modes or [None])[0] if single else list(self.modes),
+                "restitution_factor": self.restitution_factor,
                 "normal_velocity_before": [float(x) for x in self.normal_velocity_before],
                 "normal_velocity_after": [float(x) for x in self.normal_velocity_after],
                 "joint_impulses": self.joint_impulses, "energy_loss": self.energy_loss,
                 "energy_before": self.energy_before, "energy_after": self.energy_after}
 
+    def _tangential(self) -> np.ndarray:
+        if self.tangential_impulses is None:
+            return np.zeros((len(self.impulses), 3))
+        return self.tangential_impulses
+
 
 class ImpactModel:
-    """Compiled pieces of the impact equations: M, contact Jacobians, restitution, constraint Jacobian, T."""
+    """Compiled pieces of the impact equations: M, contact Jacobians (normal and relative point velocity),
+    restitution and friction laws, constraint Jacobian, T, and the body velocities for joint impulses."""
 
     def __init__(self, model: MechanicalModel) -> None:
         if not model.kin.contacts:
             raise InputError(f"{model.doc.file}: the model declares no 'contacts'")
         self.model = model
         args = (model.t, model.q, model.u, model.parameter_symbols)
-        self.names = [c["name"] for c in model.kin.contacts]
-        vn = sp.Matrix([c["vn"] for c in model.kin.contacts])
+        contacts = model.kin.contacts
+        self.names = [c["name"] for c in contacts]
+        vn = sp.Matrix([c["vn"] for c in contacts])
         self.J = compile_matrix(model.partials(vn), *args)
         self.vn_t = compile_matrix(vn.xreplace({u: 0 for u in model.u}), *args)
         self.M = compile_matrix(model.equations("lagrange").M, *args)
@@ -60,14 +75,49 @@ class ImpactModel:
         self.T = compile_matrix(sp.Matrix([model.kinetic_energy]), *args)
         vs = sp.Symbol("vn", real=True)
         self.e = [compile_matrix(sp.Matrix([c["restitution"]]), model.t, [vs], [], model.parameter_symbols)
-                  for c in model.kin.contacts]
+                  for c in contacts]
+        self.mu = compile_matrix(sp.Matrix([c.get("friction", 0) for c in contacts]), model.t, [], [],
+                                 model.parameter_symbols)
+        # contacts with points: ground normal and relative velocity of the touching material points
+        self.geometric = [c.get("normal") is not None for c in contacts]
+        zero3 = sp.zeros(3, 1)
+        normals = sp.Matrix.vstack(*[c["normal"] if c.get("normal") is not None else zero3 for c in contacts])
+        vrel = sp.Matrix.vstack(*[c["vrel"] if c.get("vrel") is not None else zero3 for c in contacts])
+        self.normals = compile_matrix(normals, *args)
+        self.Jr = compile_matrix(model.partials(vrel), *args)
+        self.vr_t = compile_matrix(vrel.xreplace({u: 0 for u in model.u}), *args)
+        self._bodies = None
+
+    def bodies(self):
+        """(name, mass function, centre-of-mass ground velocity function) of each massive link (compiled once)."""
+        if self._bodies is None:
+            m = self.model
+            args = (m.t, m.q, m.u, m.parameter_symbols)
+            self._bodies = [(b.name, compile_matrix(sp.Matrix([b.mass]), *args),
+                             compile_matrix(frame.home_R * v, *args)) for b, _r, v, _w, frame in m._body_kinematics]
+        return self._bodies
+
+
+def _tangent_basis(n: np.ndarray, Jr: np.ndarray) -> np.ndarray:
+    """Orthonormal rows spanning the tangent directions (normal to n) in which the contact can slide at all:
+    2 rows for a 3-D contact, 1 for a planar one, 0 when no rate moves the contact point tangentially."""
+    n = n / np.linalg.norm(n)
+    e = np.eye(3)[int(np.argmin(np.abs(n)))]
+    t1 = e - n * (n @ e)
+    t1 /= np.linalg.norm(t1)
+    T = np.vstack([t1, np.cross(n, t1)])
+    Uu, S, _ = np.linalg.svd(T @ Jr)
+    rank = int(np.sum(S > 1e-9 * max(float(S.max(initial=0.0)), 1e-300))) if S.size else 0
+    return Uu[:, :rank].T @ T
 
 
 def resolve(model: MechanicalModel, contact: str | None = None, q: np.ndarray | None = None,
             u: np.ndarray | None = None, t: float = 0.0, only: list[str] | None = None,
             restitution: float | None = None) -> ImpactResult:
     """Resolve one impact at the state (q, u) (default: the file's initial state). All approaching contacts (or
-    just ``contact``) are solved together: U >= 0 with v+ + e v- >= 0, complementary (an active-set search)."""
+    just ``contact``) are solved together: U >= 0 with v+ + e v- >= 0, complementary, and with friction each
+    active contact sticks (|U_t| <= mu U_n) or slips (U_t = -mu U_n along the tangential approach velocity);
+    an active-set search over (inactive, stick, slip) picks the first consistent combination."""
     im = model.__dict__.get("_impact_model") or ImpactModel(model)
     model.__dict__["_impact_model"] = im
     p = parameter_values(model)
@@ -86,58 +136,157 @@ def resolve(model: MechanicalModel, contact: str | None = None, q: np.ndarray | 
         raise AnalysisError("no contact is approaching (normal velocity >= 0): there is no impact to resolve")
     e = np.array([float(im.e[k](t, [v_before[k]], [], p)[0, 0]) if restitution is None else restitution
                   for k in range(len(im.names))])
+    mu = im.mu(t, [], [], p).ravel()
+    # tangential rows of the frictional contacts: Jt u + vtt is the sliding velocity in the basis Tb
+    Jr_all, vr_all, normals = im.Jr(t, q, u, p), im.vr_t(t, q, u, p).ravel(), im.normals(t, q, u, p).ravel()
+    Tb, Jt, vtt, slide = {}, {}, {}, {}
+    for k in approaching:
+        if mu[k] > 0 and im.geometric[k]:
+            Tb[k] = _tangent_basis(normals[3 * k:3 * k + 3], Jr_all[3 * k:3 * k + 3])
+            Jt[k] = Tb[k] @ Jr_all[3 * k:3 * k + 3]
+            vtt[k] = Tb[k] @ vr_all[3 * k:3 * k + 3]
+            slide[k] = Jt[k] @ u + vtt[k]
     n, m = len(u), A.shape[0]
-    best = None
-    for size in range(1, len(approaching) + 1):
-        for active in itertools.combinations(approaching, size):
-            active = list(active)
-            Ja = J[active]
-            K = np.block([[M, -Ja.T, -A.T], [Ja, np.zeros((len(active), len(active) + m))],
-                          [A, np.zeros((m, len(active) + m))]])
-            rhs = np.concatenate([M @ u, -e[active] * v_before[active] - vt[active], np.zeros(m)])
-            try:
-                sol = np.linalg.lstsq(K, rhs, rcond=None)[0]
-            except np.linalg.LinAlgError:
+    tol_v = {k: 1e-9 * max(1.0, abs(v_before[k]), *(np.abs(slide[k]) if k in slide else [])) for k in approaching}
+
+    def solve(ee: np.ndarray, active: list[int], modes: dict[int, str], directions: dict[int, np.ndarray]):
+        stick = [k for k in active if k in Jt and modes.get(k) == "stick" and len(Jt[k])]
+        W = J[active].copy()
+        for i, k in enumerate(active):
+            if k in Jt and modes.get(k) == "slip" and len(Jt[k]):
+                W[i] = W[i] - mu[k] * directions[k] @ Jt[k]
+        Jst = np.vstack([Jt[k] for k in stick]) if stick else np.zeros((0, n))
+        a, s = len(active), Jst.shape[0]
+        K = np.zeros((n + a + s + m, n + a + s + m))
+        K[:n, :n] = M
+        K[:n, n:n + a] = -W.T
+        K[:n, n + a:n + a + s] = -Jst.T
+        K[:n, n + a + s:] = -A.T
+        K[n:n + a, :n] = J[active]
+        K[n + a:n + a + s, :n] = Jst
+        K[n + a + s:, :n] = A
+        rhs = np.concatenate([M @ u, -ee[active] * v_before[active] - vt[active],
+                              -np.concatenate([vtt[k] for k in stick]) if stick else np.zeros(0), np.zeros(m)])
+        sol = np.linalg.lstsq(K, rhs, rcond=None)[0]
+        if s and np.linalg.norm(K @ sol - rhs) > 1e-9 * (np.linalg.norm(rhs) + np.linalg.norm(K) * np.linalg.norm(sol)):
+            return None  # sticking is kinematically impossible here (more velocity conditions than freedoms)
+        u_after = sol[:n]
+        U = np.zeros(len(im.names))
+        U[active] = sol[n:n + a]
+        Ut = {}
+        pos = n + a
+        for k in stick:
+            Ut[k] = sol[pos:pos + len(Jt[k])]
+            pos += len(Jt[k])
+        for k in active:
+            if k in Jt and modes.get(k) == "slip" and len(Jt[k]):
+                Ut[k] = -mu[k] * U[k] * directions[k]
+        return u_after, U, Ut
+
+    def consistent(ee, active, modes, directions, trial, strict_slip: bool) -> bool:
+        if trial is None:
+            return False
+        u_after, U, Ut = trial
+        if not np.all(U[active] >= -1e-12):
+            return False
+        v_after = J @ u_after + vt
+        if not all(v_after[k] + ee[k] * min(v_before[k], 0) >= -1e-9 * max(1.0, abs(v_before[k]))
+                   for k in approaching if k not in active):
+            return False
+        for k in active:
+            if k not in Jt or not len(Jt[k]):
                 continue
-            u_after = sol[:n]
-            U = np.zeros(len(im.names))
-            U[active] = sol[n:n + len(active)]
-            v_after = J @ u_after + vt
-            ok = np.all(U[active] >= -1e-12) and all(
-                v_after[k] + e[k] * min(v_before[k], 0) >= -1e-9 * max(1.0, abs(v_before[k]))
-                for k in approaching if k not in active)
-            if ok:
-                best = (u_after, U, v_after, sol[n + len(active):])
-                break
-        if best is not None:
-            break
-    if best is None:
+            if modes[k] == "stick" and np.linalg.norm(Ut[k]) > mu[k] * U[k] * (1 + 1e-9) + 1e-12:
+                return False
+            if modes[k] == "slip" and strict_slip and directions[k] @ (Jt[k] @ u_after + vtt[k]) < -tol_v[k]:
+                return False  # the cone-limited impulse reversed the sliding: the contact sticks instead
+        return True
+
+    def search(ee: np.ndarray):
+        for strict_slip in (True, False):
+            for size in range(1, len(approaching) + 1):
+                for active in itertools.combinations(approaching, size):
+                    active = list(active)
+                    frictional = [k for k in active if k in Jt and len(Jt[k])]
+                    stuck = solve(ee, active, {k: "stick" for k in frictional}, {})
+                    stuck_impulse = stuck[2] if stuck is not None else {}
+                    # slip direction: along the tangential approach velocity (the impulse opposes it); with no
+                    # sliding before the impact, against the impulse that sticking would need
+                    directions = {}
+                    for k in frictional:
+                        d = slide[k] if np.linalg.norm(slide[k]) > tol_v[k] else -stuck_impulse.get(k, slide[k])
+                        directions[k] = d / np.linalg.norm(d) if np.linalg.norm(d) > 0 else np.zeros_like(d)
+                    combos = sorted(itertools.product(("stick", "slip"), repeat=len(frictional)),
+                                    key=lambda c: c.count("slip"))
+                    for combo in combos:
+                        modes = dict(zip(frictional, combo))
+                        trial = stuck if "slip" not in combo else solve(ee, active, modes, directions)
+                        if consistent(ee, active, modes, directions, trial, strict_slip):
+                            return (active, modes, *trial)
         raise AnalysisError("no consistent set of contact impulses (the complementarity problem has no solution "
                             "in the active-set search)")
-    u_after, U, v_after, _lam = best
+
+    T_before = float(im.T(t, q, u, p)[0, 0])
+
+    def gain(result) -> float:
+        return float(im.T(t, q, result[2], p)[0, 0]) - T_before
+
+    best = search(e)
+    factor = 1.0
+    if Jt and gain(best) > 1e-12 * max(T_before, 1e-300):
+        # Newton's law with friction can create energy when the normal and tangential impulses are coupled
+        # (Kane's paradox): lower the restitution of this impact until the kinetic energy does not increase
+        lo, hi = 0.0, 1.0
+        best_lo = search(e * 0.0)
+        if gain(best_lo) <= 1e-12 * max(T_before, 1e-300):
+            for _ in range(60):
+                mid = 0.5 * (lo + hi)
+                trial = search(e * mid)
+                if gain(trial) <= 0.0:
+                    lo, best_lo = mid, trial
+                else:
+                    hi = mid
+        best, factor = best_lo, lo
+    active, modes, u_after, U, Ut = best
+    v_after = J @ u_after + vt
+    tangential = np.zeros((len(im.names), 3))
+    for k, vec in Ut.items():
+        tangential[k] = vec @ Tb[k]
+    mode_list: list[str | None] = [None] * len(im.names)
+    for k in active:
+        mode_list[k] = modes.get(k, "stick" if k in Jt else "slip")
     res = ImpactResult(list(model.coordinates), im.names, u, u_after, U, v_before, v_after,
-                       energy_before=float(im.T(t, q, u, p)[0, 0]), energy_after=float(im.T(t, q, u_after, p)[0, 0]))
-    res.joint_impulses = joint_impulses(model, q, u, u_after, U, p, t)
+                       energy_before=T_before, energy_after=float(im.T(t, q, u_after, p)[0, 0]),
+                       tangential_impulses=tangential, modes=mode_list, restitution_factor=factor)
+    res.joint_impulses = joint_impulses(model, q, u, u_after, U, p, t, tangential)
     return res
 
 
-def joint_impulses(model: MechanicalModel, q, u_before, u_after, U, p, t: float) -> dict[str, list[float]]:
+def joint_impulses(model: MechanicalModel, q, u_before, u_after, U, p, t: float,
+                   tangential: np.ndarray | None = None) -> dict[str, list[float]]:
     """Impulse each joint applies to its child link (ground axes): the momentum change of the child's subtree
-    minus the contact impulses acting on that subtree (per-body Newton-Euler impulse balance)."""
-    if any(c["gap"] is not None for c in model.kin.contacts):
-        return {}
-    from mechsys.numeric.lambdify import compile_matrix as cm
-
+    minus the contact impulses (normal and friction) acting on that subtree (per-body Newton-Euler impulse
+    balance). A plain ``gap`` contact does not say which bodies it pushes, or in which direction: while one
+    carries an impulse, joints whose subtree moves with the gap's coordinates are left out."""
+    im = model.__dict__.get("_impact_model") or ImpactModel(model)
+    model.__dict__["_impact_model"] = im
+    contacts = model.kin.contacts
     momentum: dict[str, np.ndarray] = {}
-    for b, _r, v, _w, frame in model._body_kinematics:
-        vg = cm(frame.home_R * v, model.t, model.q, model.u, model.parameter_symbols)
-        mass = float(sp.sympify(b.mass).xreplace(dict(zip(model.parameter_symbols, map(sp.Float, p)))))
-        momentum[b.name] = mass * (vg(t, q, u_after, p).ravel() - vg(t, q, u_before, p).ravel())
+    for name, mass, vg in im.bodies():
+        mass_value = float(mass(t, q, u_after, p)[0, 0])
+        momentum[name] = mass_value * (vg(t, q, u_after, p).ravel() - vg(t, q, u_before, p).ravel())
+    normals = im.normals(t, q, u_before, p).ravel()
     external: dict[str, np.ndarray] = {}
-    for k, c in enumerate(model.kin.contacts):
-        n = cm(sp.Matrix(c["normal"]), model.t, model.q, model.u, model.parameter_symbols)(t, q, u_before, p).ravel()
+    unknown: set = set()  # coordinates of plain gap contacts that carry an impulse
+    for k, c in enumerate(contacts):
+        if U[k] == 0:
+            continue
+        if not im.geometric[k]:
+            unknown |= set(c["gap"].free_symbols) & set(model.q)
+            continue
+        impulse = U[k] * normals[3 * k:3 * k + 3] + (tangential[k] if tangential is not None else 0.0)
         for link, _pos, sign in c["points"]:
-            external[link] = external.get(link, np.zeros(3)) + sign * U[k] * n
+            external[link] = external.get(link, np.zeros(3)) + sign * impulse
     children: dict[str, list[str]] = {}
     for j in model.kin.joints:
         children.setdefault(j.parent, []).append(j.link)
@@ -148,9 +297,15 @@ def joint_impulses(model: MechanicalModel, q, u_before, u_after, U, p, t: float)
             out += subtree(ch)
         return out
 
+    def moves_with_unknown(link: str) -> bool:
+        frame = model.kin.frames[link]
+        return bool((frame.origin.free_symbols | frame.R.free_symbols) & unknown)
+
     result = {}
     for j in model.kin.joints:
         links = subtree(j.link)
+        if unknown and any(moves_with_unknown(x) for x in links):
+            continue
         total = sum((momentum.get(x, np.zeros(3)) - external.get(x, np.zeros(3)) for x in links), np.zeros(3))
         result[j.link] = [float(x) if abs(x) > 1e-12 * (1 + np.max(np.abs(total))) else 0.0 for x in total]
     return result

@@ -7,13 +7,49 @@ from scipy.integrate import solve_ivp
 from mechsys.errors import AnalysisError
 
 
+def _pressed(rhs, t: float, q: np.ndarray, u: np.ndarray, trial: list[int]) -> list[int]:
+    """The touching contacts among ``trial`` that a persistent row would press (compressive multiplier). Rows are
+    added together and the most tensile one is dropped until the rest are all compressive."""
+    trial = list(trial)
+    base = list(rhs.persistent)
+    while trial:
+        rhs.persistent[:] = base + trial
+        try:
+            lam = rhs.accelerations(t, q, u)[1][-len(trial):]
+        finally:
+            rhs.persistent[:] = base
+        tol = 1e-12 * max(1.0, float(np.max(np.abs(lam))))
+        if np.all(lam > tol):
+            return trial
+        del trial[int(np.argmin(lam))]
+    return []
+
+
+def _lift_off_functions(rhs, c, p) -> list:
+    """Terminal events on the multipliers of the persistent contacts: a contact force turning tensile (falling
+    through 0) ends the segment so that the contact can be released."""
+    n = c.n
+    fns = []
+    for j, k in enumerate(list(rhs.persistent)):
+        count = len(rhs.persistent)
+
+        def h(tt, yy, j=j, count=count):
+            return float(rhs.accelerations(tt, yy[:n], yy[n:])[1][-count + j])
+        h.direction, h.terminal = -1.0, True
+        fns.append((k, h))
+    return fns
+
+
 def integrate_with_impacts(model, c, rhs, p, grid, y0, method, rtol, atol, event_fns, note_events,
                             capture_velocity):
     """Segments between impacts: gap = 0 (closing) stops the integrator, the impulse law gives the velocities of
     separation, and integration restarts. Rest rule: an impact whose approach speed is below capture_velocity is
     plastic and its contact becomes persistent (a constraint row), so a bouncing ball ends in finitely many
-    impacts instead of a Zeno sequence. Persistent contacts do not lift off again (documented limitation)."""
-    from mechsys.analysis.collide import resolve
+    impacts instead of a Zeno sequence. A contact touching at rest that would be pressed becomes persistent too
+    (a block laid on a table, or after a plastic impact). A persistent contact lifts off when its multiplier
+    turns tensile (an event), and a touching contact at rest that opens ends the segment once its gap exceeds a
+    small threshold, so that its next closing is an event again."""
+    from mechsys.analysis.collide import joint_impulses, resolve
 
     n = c.n
     impacts: list[dict] = []
@@ -23,6 +59,7 @@ def integrate_with_impacts(model, c, rhs, p, grid, y0, method, rtol, atol, event
     t_end = float(grid[-1])
     stopped = False
     guard = 0
+    released: set = set()  # contacts just released by a lift-off: not re-captured at the restart
     while t < t_end and not stopped:
         guard += 1
         if guard > 100000:
@@ -31,18 +68,38 @@ def integrate_with_impacts(model, c, rhs, p, grid, y0, method, rtol, atol, event
         gaps0 = c.gaps(t, q0, u0, p).ravel()
         vn0 = c.gap_A(t, q0, u0, p) @ u0  # (gap contacts are scleronomic here)
         touching0 = np.abs(gaps0) <= 1e-9 * (1 + np.max(np.abs(q0)))
-        gap_events = []
+        at_rest = [k for k in range(len(c.gap_names)) if k not in rhs.persistent and touching0[k]
+                   and abs(vn0[k]) <= 1e-12 * max(1.0, np.max(np.abs(u0)))]
+        rhs.persistent.extend(_pressed(rhs, t, q0, u0, [k for k in at_rest if k not in released]))
+        released = set()
+        gap_events, open_events = [], []
+        delta = 1e-8 * (1 + np.max(np.abs(q0)))
         for k in range(len(c.gap_names)):
-            if k in rhs.persistent or (touching0[k] and abs(vn0[k]) <= 1e-12 * max(1.0, np.max(np.abs(u0)))):
-                continue  # touching at rest relative to each other: a zero-length crossing at the segment start
+            if k in rhs.persistent:
+                continue
+            if k in at_rest:
+                # touching at rest relative to each other: a zero-length crossing at the segment start; end the
+                # segment if the gap opens, so that its closing is watched again
+
+                def o(tt, yy, k=k):
+                    return float(c.gaps(tt, yy[:n], yy[n:], p)[k, 0]) - delta
+                o.direction, o.terminal = 1.0, True
+                open_events.append((k, o))
+                continue
 
             def g(tt, yy, k=k):
                 return float(c.gaps(tt, yy[:n], yy[n:], p)[k, 0])
             g.direction, g.terminal = -1.0, True
             gap_events.append((k, g))
-        fns = [g for _, g in gap_events] + list(event_fns)
+        lift_events = _lift_off_functions(rhs, c, p)
+        own = gap_events + open_events + lift_events
+        fns = [g for _, g in own] + list(event_fns)
         t_eval = grid[(grid > t) & (grid <= t_end)]
-        sol = solve_ivp(rhs, (t, t_end), y, method=method, rtol=rtol, atol=atol, t_eval=t_eval, events=fns or None)
+        # a resting state lets the integrator take huge steps: bound them by the output interval so that a
+        # multiplier turning tensile between two step ends is not stepped over
+        bound = {"max_step": float(grid[1] - grid[0])} if lift_events and len(grid) > 1 else {}
+        sol = solve_ivp(rhs, (t, t_end), y, method=method, rtol=rtol, atol=atol, t_eval=t_eval, events=fns or None,
+                        **bound)
         if not sol.success:
             raise AnalysisError(f"integration failed at t = {sol.t[-1]:.6g}: {sol.message}")
         steps += len(sol.t)
@@ -50,19 +107,32 @@ def integrate_with_impacts(model, c, rhs, p, grid, y0, method, rtol, atol, event
             times += list(sol.t)
             states += list(np.asarray(sol.y).T)
         user = type(sol)(sol)
-        user.t_events = sol.t_events[len(gap_events):] if sol.t_events else None
-        user.y_events = sol.y_events[len(gap_events):] if sol.y_events else None
+        user.t_events = sol.t_events[len(own):] if sol.t_events else None
+        user.y_events = sol.y_events[len(own):] if sol.y_events else None
         if note_events(user) and sol.status == 1:
             stopped = True
             break
         if sol.status != 1:
             break
-        hit = [(float(ts[-1]), k) for (k, _), ts in zip(gap_events, sol.t_events) if len(ts)]
-        if not hit:
+        fired = [(float(ts[-1]), i) for i, ts in enumerate(sol.t_events[:len(own)]) if len(ts)]
+        if not fired:
             break
+        t_first, i_first = min(fired)
+        if i_first >= len(gap_events):
+            # a resting contact opened, or a persistent one turned tensile: restart from there
+            t, y = t_first, sol.y_events[i_first][-1].copy()
+            for _t, i in fired:
+                if i >= len(gap_events) + len(open_events) and abs(_t - t_first) <= 1e-12 * max(1.0, abs(t)):
+                    k = own[i][0]
+                    rhs.persistent.remove(k)
+                    released.add(k)
+            times.append(t)
+            states.append(y)
+            continue
+        hit = [(t_ev, i) for t_ev, i in fired if i < len(gap_events)]
         t_hit = min(ts for ts, _ in hit)
-        k_hit = [gap_events[i][0] for i, ((k, _), ts) in enumerate(zip(gap_events, sol.t_events)) if len(ts)]
-        y = sol.y_events[[i for i, ts in enumerate(sol.t_events[:len(gap_events)]) if len(ts)][0]][-1].copy()
+        k_hit = [gap_events[i][0] for _t, i in hit]
+        y = sol.y_events[hit[0][1]][-1].copy()
         t = t_hit
         q, u = y[:n], y[n:]
         gaps = c.gaps(t, q, u, p).ravel()
@@ -89,13 +159,9 @@ def integrate_with_impacts(model, c, rhs, p, grid, y0, method, rtol, atol, event
             else:
                 del rhs.persistent[-len(trial):]
         for name in touching:
-            k = c.gap_names.index(name)
             j = res.contacts.index(name)
             if captured or -res.normal_velocity_before[j] >= capture_velocity:  # round-off touches are no impacts
-                impacts.append({"t": t, "contact": name, "impulse": float(res.impulses[j]),
-                                "rates_before": {cn: float(v) for cn, v in zip(model.coordinates, u)},
-                                "rates_after": {cn: float(v) for cn, v in zip(model.coordinates, u_new)},
-                                "energy_loss": res.energy_loss, "captured": captured})
+                impacts.append(_record(model, t, name, res, u, u_new, captured, q, p, joint_impulses))
         u_new = sequential_impacts(model, c, p, t, q, u_new, rhs, impacts, resolve)
         y = np.concatenate([q, u_new])
         times.append(t)
@@ -104,6 +170,19 @@ def integrate_with_impacts(model, c, rhs, p, grid, y0, method, rtol, atol, event
     T_arr = np.array(times)[order]
     Y = np.array(states)[order]
     return T_arr, Y, steps, impacts, stopped
+
+
+def _record(model, t, name, res, u, u_new, captured, q, p, joint_impulses) -> dict:
+    """One row of the impact table (rates as {coordinate: value}; friction and joint impulses included)."""
+    j = res.contacts.index(name)
+    joints = res.joint_impulses if np.array_equal(u_new, res.rates_after) else \
+        joint_impulses(model, q, u, u_new, res.impulses, p, t, res.tangential_impulses)
+    return {"t": t, "contact": name, "impulse": float(res.impulses[j]),
+            "rates_before": {cn: float(v) for cn, v in zip(model.coordinates, u)},
+            "rates_after": {cn: float(v) for cn, v in zip(model.coordinates, u_new)},
+            "energy_loss": res.energy_loss, "captured": captured,
+            "tangential_impulse": [float(x) for x in res.tangential_impulses[j]], "mode": res.modes[j],
+            "joint_impulses": joints}
 
 
 def sequential_impacts(model, c, p, t, q, u, rhs, impacts, resolve) -> np.ndarray:
@@ -119,10 +198,6 @@ def sequential_impacts(model, c, p, t, q, u, rhs, impacts, resolve) -> np.ndarra
             return u
         res = resolve(model, None, q, u, t, only=approaching[:1])
         name = approaching[0]
-        j = res.contacts.index(name)
-        impacts.append({"t": t, "contact": name, "impulse": float(res.impulses[j]),
-                        "rates_before": {cn: float(v) for cn, v in zip(model.coordinates, u)},
-                        "rates_after": {cn: float(v) for cn, v in zip(model.coordinates, res.rates_after)},
-                        "energy_loss": res.energy_loss, "captured": False})
+        impacts.append(_record(model, t, name, res, u, res.rates_after, False, q, p, None))
         u = res.rates_after
     raise AnalysisError("more than 1000 sequential impacts at one instant")

@@ -241,14 +241,12 @@ def choose_method(rhs: RightHandSide, t0: float, y0: np.ndarray, t_end: float,
 
 
 def native_integrator(model: MechanicalModel, c: Compiled, required: bool):
-    """The compiled DOP853 loop when this scene can use it (no constraints, contacts or events) and a C compiler
-    is available; with ``required`` (--method native) a reason is raised instead of returning None."""
+    """The compiled DOP853 loop when this scene can use it (no contacts or events) and a C compiler is available;
+    with ``required`` (--method native) a reason is raised instead of returning None."""
     from mechsys.numeric import native
 
     why = None
-    if c.m:
-        why = "constraints (closed loops, rolling, prescribed motions) need the projected scipy path"
-    elif c.gap_names:
+    if c.gap_names:
         why = "contacts need the impact event loop"
     elif model.events:
         why = "events need scipy's event location"
@@ -259,6 +257,30 @@ def native_integrator(model: MechanicalModel, c: Compiled, required: bool):
             raise AnalysisError(f"--method native: {why}; use DOP853")
         return None
     return native.load(model)
+
+
+def _native_projected(nat, c: Compiled, p: np.ndarray, grid: np.ndarray, y0: np.ndarray, rtol: float, atol: float,
+                      progress) -> tuple:
+    """Closed loops on the compiled loop: one native solve per output interval (as the scipy path restarts
+    solve_ivp), projection onto the constraints in between. Returns (Y, RHS calls, steps), or (None, calls, t) when
+    the augmented matrix is singular at t."""
+    n = c.n
+    ys, calls, steps = [y0], 0, 0
+    y = y0
+    for k, (a, b) in enumerate(zip(grid[:-1], grid[1:])):
+        run = nat.run(p, y, np.array([a, b]), rtol, atol)
+        calls += run.nfev
+        steps += run.nsteps
+        if run.status == -2:
+            return None, calls, run.t_reached
+        if run.status:
+            raise AnalysisError(f"integration failed at t = {run.t_reached:.6g}: {run.message}")
+        q, u = project(c, p, float(b), run.y[-1, :n], run.y[-1, n:])
+        y = np.concatenate([q, u])
+        ys.append(y)
+        if progress is not None and k % 50 == 49:
+            progress(float(b))
+    return np.array(ys), calls, steps
 
 
 def simulate(model: MechanicalModel, t_end: float, dt: float | None = None, method: str = "auto",
@@ -320,7 +342,17 @@ def simulate(model: MechanicalModel, t_end: float, dt: float | None = None, meth
                 stop = stop or action == "stop"
         return stop
 
-    if c.m:
+    if c.m and chosen == "native":
+        Y, calls, steps = _native_projected(nat, c, p, grid, ys[0], rtol, atol, progress)
+        rhs.calls += calls
+        if Y is None:  # a singular [[M, A^T], [A, 0]]: redundant constraints need the least-squares solve
+            if method == "native":
+                raise AnalysisError(f"integration failed at t = {steps:.6g}: the constraint Jacobian is rank "
+                                    "deficient (redundant constraints?); --method DOP853 solves it by least squares")
+            warnings.append(f"native: [[M, A^T], [A, 0]] is singular at t = {steps:.6g} (redundant constraints?); "
+                            "continuing with DOP853 and least squares")
+            chosen, steps = "DOP853", 0
+    if c.m and chosen != "native":
         # closed loops: integrate output interval by output interval and project onto the constraints
         from scipy.integrate import solve_ivp  # imported where used: the native path never needs it
 
@@ -341,6 +373,8 @@ def simulate(model: MechanicalModel, t_end: float, dt: float | None = None, meth
                 note_events(sol)
         Y = np.array(ys)
         grid = np.array(times)
+    elif c.m:
+        grid = grid[:len(Y)]
     elif chosen == "native":
         run = nat.run(p, ys[0], grid, rtol, atol, progress)
         if run.status:

@@ -435,9 +435,13 @@ class Builder:
         return [ConstraintRow(f"{name}.{ax}", "nonholonomic", None, slip["xyz".index(ax)]) for ax in c.components]
 
     # ------------------------------------------------------------------------------------- contacts
+    PRIMITIVES = ("point_plane", "sphere_plane", "sphere_sphere", "point_line")
+
     def build_contacts(self) -> None:
         """Each contact: its normal relative velocity vn (linear in the rates; < 0 approaching), the gap (when
-        given), the restitution law e(vn), and where the impulse acts (for joint impulses)."""
+        given or built from a primitive), the restitution law e(vn), the friction coefficient, and, when the
+        contact has points, the ground normal, the relative velocity of the touching material points (for the
+        tangential impulse) and the links the impulse acts on (for joint impulses)."""
         vn_symbol = sp.Symbol("vn", real=True)
         names = set()
         for i, c in enumerate(self.doc.spec.contacts):
@@ -446,15 +450,25 @@ class Builder:
                 raise self.doc.error(cp + ("name",), f"duplicate contact name {c.name!r}")
             names.add(c.name)
             e = self.doc.parse(c.restitution, cp + ("restitution",), "parameter", extra={"vn": vn_symbol})
-            entry = {"name": c.name, "restitution": e, "vn_symbol": vn_symbol, "points": []}
-            if (c.between is None) == (c.gap is None):
-                raise self.doc.error(cp, "give either 'between' (with 'normal') or 'gap'")
-            if c.gap is not None:
+            mu = self.doc.parse(c.friction, cp + ("friction",), "parameter")
+            self.real_value(mu, cp + ("friction",), nonnegative=True)
+            entry = {"name": c.name, "restitution": e, "vn_symbol": vn_symbol, "points": [], "friction": mu,
+                     "vrel": None, "normal": None}
+            given = [k for k in ("between", "gap", *self.PRIMITIVES) if getattr(c, k) is not None]
+            if len(given) != 1:
+                raise self.doc.error(cp, "give exactly one of 'between' (with 'normal'), 'gap', 'point_plane', "
+                                         "'sphere_plane', 'sphere_sphere' or 'point_line'"
+                                     + (f" (got {', '.join(given)})" if given else ""))
+            kind = entry["kind"] = given[0]
+            if kind != "between" and c.normal is not None:
+                raise self.doc.error(cp + ("normal",), f"'normal' belongs to 'between' contacts, not to '{kind}'")
+            if kind == "gap":
                 gap = self.doc.parse(c.gap, cp + ("gap",))
-                if not (gap.free_symbols & set(self.doc.coords.values())):
-                    raise self.doc.error(cp + ("gap",), "the gap does not depend on any free coordinate")
+                if mu != 0:
+                    raise self.doc.error(cp + ("friction",), "friction needs the contact points: use 'between' or "
+                                                              "a gap primitive (point_plane, sphere_plane, ...)")
                 entry.update(gap=gap, vn=self.rate_of(gap))
-            else:
+            elif kind == "between":
                 if c.normal is None:
                     raise self.doc.error(cp, "a contact 'between' two points needs a 'normal'")
                 n = self.frame(c.frame, cp + ("frame",)).R * self.axis(c.normal, cp + ("normal",))
@@ -468,8 +482,68 @@ class Builder:
                 vn = n.dot(velocities[0] - velocities[1])
                 if _identically_zero(vn, self.doc):
                     raise self.doc.error(cp, "the contact points cannot approach each other along the normal")
-                entry.update(gap=None, vn=vn, normal=n)
+                entry.update(gap=None, vn=vn, normal=n, vrel=velocities[0] - velocities[1])
+            else:
+                entry.update(self.primitive(kind, getattr(c, kind), cp + (kind,)))
+            if entry["gap"] is not None:
+                where = cp + (kind,)
+                if not (entry["gap"].free_symbols & set(self.doc.coords.values())):
+                    raise self.doc.error(where, "the gap does not depend on any free coordinate")
+                if kind != "gap" and _identically_zero(entry["vn"], self.doc):
+                    raise self.doc.error(where, "the two sides cannot approach each other along the normal")
             self.kin.contacts.append(entry)
+
+    @staticmethod
+    def material_velocity(frame: FrameState, x: sp.Matrix) -> sp.Matrix:
+        """Ground velocity of the material point of ``frame``'s link at the ground position ``x``."""
+        return frame.home_R * frame.v + frame.omega_ground.cross(x - frame.origin)
+
+    def primitive(self, kind: str, spec: Any, path: Path) -> dict:
+        """Gap, normal, relative velocity at the touching points and impulse points of a named gap primitive."""
+        def side(ref: str, p: Path) -> tuple[str, FrameState, sp.Matrix]:
+            frame, local = self.point_on(ref, p)
+            return ref.partition(".")[0], frame, frame.point(local)
+
+        def surface(pl: Any, p: Path, line: bool = False) -> tuple[str, FrameState, sp.Matrix, sp.Matrix]:
+            link, frame, q = side(pl.point, p + ("point",))
+            axes = self.frame(pl.frame if pl.frame is not None else link, p + ("frame",))
+            if not line:
+                return link, frame, q, axes.R * self.axis(pl.normal, p + ("normal",))
+            d = self.axis(pl.direction, p + ("direction",))
+            if self.real_value(d[0] ** 2 + d[1] ** 2, p + ("direction",)) <= 1e-24:
+                raise self.doc.error(p + ("direction",), "the line direction must not be along the frame's z axis "
+                                                         "(the line lies in the x-y plane of its frame)")
+            return link, frame, q, axes.R * unit([-d[1], d[0], 0])
+
+        def radius(value: Any, p: Path) -> sp.Expr:
+            r = self.doc.parse(value, p, "parameter")
+            self.real_value(r, p, nonnegative=True)
+            return r
+
+        if kind in ("point_plane", "sphere_plane", "point_line"):
+            if kind == "point_line":
+                link_a, fa, c = side(spec.point, path + ("point",))
+                link_b, fb, q, n = surface(spec.line, path + ("line",), line=True)
+                r = sp.Integer(0)
+            else:
+                point_key = "point" if kind == "point_plane" else "center"
+                link_a, fa, c = side(getattr(spec, point_key), path + (point_key,))
+                link_b, fb, q, n = surface(spec.plane, path + ("plane",))
+                r = radius(spec.radius, path + ("radius",)) if kind == "sphere_plane" else sp.Integer(0)
+            gap = n.dot(c - q) - r
+            xa = xb = c - r * n
+        else:
+            link_a, fa, ca = side(spec.centers[0], path + ("centers", 0))
+            link_b, fb, cb = side(spec.centers[1], path + ("centers", 1))
+            ra, rb = radius(spec.radii[0], path + ("radii", 0)), radius(spec.radii[1], path + ("radii", 1))
+            d = ca - cb
+            dist = sp.sqrt(d.dot(d))
+            n = d / dist
+            gap = dist - ra - rb
+            xa, xb = ca - ra * n, cb + rb * n
+        vrel = self.material_velocity(fa, xa) - self.material_velocity(fb, xb)
+        return {"gap": gap, "vn": self.rate_of(gap), "normal": n, "vrel": vrel,
+                "points": [(link_a, xa, 1), (link_b, xb, -1)]}
 
     # ------------------------------------------------------------------------------------- loads
     def build_loads(self) -> None:

@@ -326,8 +326,54 @@ class Event(Strict):
 
 
 # ----------------------------------------------------------------------------------------- contacts
+class ContactPlane(Strict):
+    """A plane fixed in the link of ``point``: the side +normal is outside (gap > 0)."""
+
+    point: PointRef = Field(description="a point of the plane; the plane moves with this point's link")
+    normal: Axis = Field(description="outward normal of the plane, in 'frame' axes (parameters only)")
+    frame: str | None = Field(None, description="axes of 'normal' (a link or ground); default the point's link")
+
+
+class ContactLine(Strict):
+    """A line in the x-y plane of ``frame``; the outside is to the left of ``direction`` (normal z x direction)."""
+
+    point: PointRef = Field(description="a point of the line; the line moves with this point's link")
+    direction: Axis = Field(description="direction of the line, in 'frame' axes (parameters only)")
+    frame: str | None = Field(None, description="axes of 'direction' (a link or ground); default the point's link")
+
+
+class PointPlane(Strict):
+    """Gap = normal . (point - plane.point): a point of one link against a plane of another."""
+
+    point: PointRef
+    plane: ContactPlane
+
+
+class SpherePlane(Strict):
+    """Gap = normal . (center - plane.point) - radius: a sphere (or disk edge) against a plane."""
+
+    center: PointRef
+    radius: Expr
+    plane: ContactPlane
+
+
+class SphereSphere(Strict):
+    """Gap = |center_a - center_b| - r_a - r_b; the normal points from b to a."""
+
+    centers: Annotated[list[PointRef], Field(min_length=2, max_length=2)]
+    radii: Annotated[list[Expr], Field(min_length=2, max_length=2)]
+
+
+class PointLine(Strict):
+    """Gap = signed 2-D distance of a point to a line: (z x direction) . (point - line.point)."""
+
+    point: PointRef
+    line: ContactLine
+
+
 class Contact(Strict):
-    """A contact pair for impacts: two points and a normal, or a gap function (gap >= 0 means separated)."""
+    """A contact pair for impacts: two points and a normal, a gap function (gap >= 0 means separated), or a named
+    gap primitive (point_plane, sphere_plane, sphere_sphere, point_line)."""
 
     name: Name
     between: Annotated[list[PointRef], Field(min_length=2, max_length=2)] | None = Field(
@@ -336,7 +382,13 @@ class Contact(Strict):
     frame: str = "ground"
     gap: Expr | None = Field(None, description="gap function of the coordinates (>= 0 separated); its gradient "
                                                 "gives the normal direction in coordinate space")
+    point_plane: PointPlane | None = Field(None, description="instead of 'gap': a point against a plane")
+    sphere_plane: SpherePlane | None = Field(None, description="instead of 'gap': a sphere against a plane")
+    sphere_sphere: SphereSphere | None = Field(None, description="instead of 'gap': two spheres")
+    point_line: PointLine | None = Field(None, description="instead of 'gap': a point against a line (2-D)")
     restitution: Expr = Field(1, description="Newton's coefficient e (may depend on the approach speed 'vn')")
+    friction: Expr = Field(0, description="Coulomb's coefficient mu >= 0 of the tangential impulse "
+                                          "(parameters only; needs contact points: 'between' or a primitive)")
 
 
 # ----------------------------------------------------------------------------------------- expectations

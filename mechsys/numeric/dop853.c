@@ -4,7 +4,8 @@
  * the compiled loop takes the same steps as `--method DOP853` (to rounding).
  *
  * The generated part defines: N (coordinates), NOUT (number of staged terms), NB (bodies), LAYOUT[2*NB]
- * (has mass, has inertia per body), pieces(t, q, u, p, out), and the DOP853 tables A, B, C, E3, E5, D. */
+ * (has mass, has inertia per body), pieces(t, q, u, p, out), NCON (constraint rows) and
+ * constraint_rows(t, q, u, p, out) writing A (NCON x N, row-major) then b, and the DOP853 tables. */
 
 #define NY (2 * N)
 #define NSTAGES 12
@@ -59,6 +60,9 @@ static int solve(double *A, double *b, int n) {
 static int accelerations(double t, const double *y, const double *p, double *a) {
     double out[NOUT];
     double M[N * N], IJ[3 * N];
+#if NCON > 0
+    double rows[NCON * N + NCON], K[(N + NCON) * (N + NCON)], x[N + NCON];
+#endif
     const double *q = y, *u = y + N;
     pieces(t, q, u, p, out);
     for (int i = 0; i < N; i++) a[i] = out[i];
@@ -93,7 +97,25 @@ static int accelerations(double t, const double *y, const double *p, double *a) 
             k += 3 * N + 15;
         }
     }
+#if NCON > 0
+    /* closed loops, rolling, drives: [[M, A^T], [A, 0]] [q''; -lambda] = [f; b] */
+    constraint_rows(t, q, u, p, rows);
+    const int S = N + NCON;
+    memset(K, 0, sizeof K);
+    for (int i = 0; i < N; i++) {
+        for (int j = 0; j < N; j++) K[i * S + j] = M[i * N + j];
+        x[i] = a[i];
+    }
+    for (int r = 0; r < NCON; r++) {
+        for (int j = 0; j < N; j++) { K[(N + r) * S + j] = rows[r * N + j]; K[j * S + N + r] = rows[r * N + j]; }
+        x[N + r] = rows[NCON * N + r];
+    }
+    int status = solve(K, x, S);
+    for (int i = 0; i < N; i++) a[i] = x[i];
+    return status;
+#else
     return solve(M, a, N);
+#endif
 }
 
 static int rhs(state_t *s, double t, const double *y, const double *p, double *dy) {

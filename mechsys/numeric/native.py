@@ -21,7 +21,9 @@ import numpy as np
 from mechsys.errors import AnalysisError
 
 TEMPLATE = Path(__file__).with_name("dop853.c")
-_STATUS = {-1: "the step size became too small", -2: "the mass matrix is singular",
+_STATUS = {-1: "the step size became too small",
+           -2: "the mass matrix (or, with constraints, [[M, A^T], [A, 0]]: redundant constraints or a singular "
+               "configuration) is singular",
            -3: "the state or its derivative is not finite", -4: "an output time lies past the end"}
 
 
@@ -64,8 +66,8 @@ def _c_printer(names: dict):
     return Printer()
 
 
-def pieces_source(exprs: Sequence, t, q: Sequence, u: Sequence, params: Sequence) -> str:
-    """C function ``pieces(t, q, u, p, out)`` writing ``exprs`` into ``out`` (shared subexpressions once)."""
+def pieces_source(exprs: Sequence, t, q: Sequence, u: Sequence, params: Sequence, name: str = "pieces") -> str:
+    """C function ``name(t, q, u, p, out)`` writing ``exprs`` into ``out`` (shared subexpressions once)."""
     import sympy as sp
 
     names = {t: "t", **{s: f"q[{i}]" for i, s in enumerate(q)}, **{s: f"u[{i}]" for i, s in enumerate(u)},
@@ -74,7 +76,7 @@ def pieces_source(exprs: Sequence, t, q: Sequence, u: Sequence, params: Sequence
     for k, (sym, _) in enumerate(replacements):
         names[sym] = f"x{k}"
     printer = _c_printer(names)
-    lines = ["static void pieces(double t, const double *q, const double *u, const double *p, double *out) {",
+    lines = [f"static void {name}(double t, const double *q, const double *u, const double *p, double *out) {{",
              "    (void)t; (void)q; (void)u; (void)p;"]
     lines += [f"    const double {names[sym]} = {printer.doprint(value)};" for sym, value in replacements]
     lines += [f"    out[{i}] = {printer.doprint(e)};" for i, e in enumerate(reduced)]
@@ -115,13 +117,17 @@ def model_source(model) -> str:
     co = _dop853_coefficients()
     pieces, layout = model_pieces(model)
     n = len(model.q)
+    m = len(model.kin.constraints)
+    rows = [*model.constraint_jacobian, *model.constraint_rhs] if m else [0]  # A (m x n, row-major), then b
     head = ["#include <math.h>", "#include <string.h>", "#ifndef M_PI", "#define M_PI 3.14159265358979323846",
             "#endif", f"#define N {n}", f"#define NOUT {max(len(pieces), 1)}", f"#define NB {max(len(layout), 1)}",
             "static const int LAYOUT[2 * NB] = {" + (", ".join(str(int(x)) for b in layout for x in b) or "0, 0")
             + "};",
             _table("A", co.A), _table("B", co.B), _table("C", co.C), _table("E3", co.E3), _table("E5", co.E5),
             _table("D", co.D),
-            pieces_source(pieces, model.t, model.q, model.u, model.parameter_symbols)]
+            f"#define NCON {m}",
+            pieces_source(pieces, model.t, model.q, model.u, model.parameter_symbols),
+            pieces_source(rows, model.t, model.q, model.u, model.parameter_symbols, "constraint_rows")]
     return "\n".join(head) + "\n" + TEMPLATE.read_text(encoding="utf-8")
 
 
@@ -217,15 +223,15 @@ class NativeIntegrator:
 
 
 def load(model) -> Optional[NativeIntegrator]:
-    """The model's native integrator, from the cache or compiled now; None when the model has constraints (the
-    native loop handles M q'' = f only) or no compiler is available."""
+    """The model's native integrator, from the cache or compiled now; None when no compiler is available.
+    With constraints the accelerations solve [[M, A^T], [A, 0]] [q''; -lambda] = [f; b]; the caller projects."""
     from mechsys.numeric import cache
 
     cached = getattr(model, "_native_integrator", False)
     if cached is not False:
         return cached
     result = None
-    if compiler() is not None and not model.kin.constraints:
+    if compiler() is not None:
         folder = cache.cache_dir()
         key = cache.model_key(model, "native")
         if folder is None:
