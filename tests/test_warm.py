@@ -82,4 +82,4 @@ def test_stiff_horizon_is_not_run_from_the_plan(tmp_path):
     _, light_short = _run(tmp_path, model, "--t-end", "0.01")
     assert light_short
     long_run, light_long = _run(tmp_path, model, "--t-end", "10", "--dt", "0.1")
-    assert not light_long and "Radau" in long_run
+    assert not light_long and ("CVODE" in long_run or "Radau" in long_run)

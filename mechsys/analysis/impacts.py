@@ -50,6 +50,7 @@ def integrate_with_impacts(model, c, rhs, p, grid, y0, method, rtol, atol, event
     turns tensile (an event), and a touching contact at rest that opens ends the segment once its gap exceeds a
     small threshold, so that its next closing is an event again."""
     from mechsys.analysis.collide import joint_impulses, resolve
+    from mechsys.analysis.simulate import project
 
     n = c.n
     impacts: list[dict] = []
@@ -62,7 +63,7 @@ def integrate_with_impacts(model, c, rhs, p, grid, y0, method, rtol, atol, event
     released: set = set()  # contacts just released by a lift-off: not re-captured at the restart
     while t < t_end and not stopped:
         guard += 1
-        if guard > 100000:
+        if guard > 100000 + (len(grid) if c.m else 0):
             raise AnalysisError("more than 100000 impacts: increase the capture velocity")
         q0, u0 = y[:n], y[n:]
         gaps0 = c.gaps(t, q0, u0, p).ravel()
@@ -87,18 +88,31 @@ def integrate_with_impacts(model, c, rhs, p, grid, y0, method, rtol, atol, event
                 open_events.append((k, o))
                 continue
 
-            def g(tt, yy, k=k):
-                return float(c.gaps(tt, yy[:n], yy[n:], p)[k, 0])
+            if touching0[k] and vn0[k] > 0:
+                # touching and separating (just after an impact): g(t0) = 0 would make the root finder return t0
+                # itself; g / (t - t0), which tends to the separation speed at t0, has the same later roots
+
+                def g(tt, yy, k=k, t0=t, v0=float(vn0[k])):
+                    if tt <= t0:
+                        return v0
+                    return float(c.gaps(tt, yy[:n], yy[n:], p)[k, 0]) / (tt - t0)
+            else:
+                def g(tt, yy, k=k):
+                    return float(c.gaps(tt, yy[:n], yy[n:], p)[k, 0])
             g.direction, g.terminal = -1.0, True
             gap_events.append((k, g))
         lift_events = _lift_off_functions(rhs, c, p)
         own = gap_events + open_events + lift_events
         fns = [g for _, g in own] + list(event_fns)
-        t_eval = grid[(grid > t) & (grid <= t_end)]
+        # closed loops: segments end at the next output point at the latest, where the state is projected onto the
+        # constraints (as simulate's closed-loop path does)
+        later = grid[grid > t + 1e-13 * max(1.0, abs(t))]
+        seg_end = float(later[0]) if c.m and len(later) else t_end
+        t_eval = grid[(grid > t) & (grid <= seg_end)]
         # a resting state lets the integrator take huge steps: bound them by the output interval so that a
         # multiplier turning tensile between two step ends is not stepped over
         bound = {"max_step": float(grid[1] - grid[0])} if lift_events and len(grid) > 1 else {}
-        sol = solve_ivp(rhs, (t, t_end), y, method=method, rtol=rtol, atol=atol, t_eval=t_eval, events=fns or None,
+        sol = solve_ivp(rhs, (t, seg_end), y, method=method, rtol=rtol, atol=atol, t_eval=t_eval, events=fns or None,
                         **bound)
         if not sol.success:
             raise AnalysisError(f"integration failed at t = {sol.t[-1]:.6g}: {sol.message}")
@@ -113,7 +127,12 @@ def integrate_with_impacts(model, c, rhs, p, grid, y0, method, rtol, atol, event
             stopped = True
             break
         if sol.status != 1:
-            break
+            if seg_end >= t_end:
+                break
+            q, u = project(c, p, seg_end, sol.y[:n, -1], sol.y[n:, -1])
+            t, y = seg_end, np.concatenate([q, u])
+            states[-1] = y
+            continue
         fired = [(float(ts[-1]), i) for i, ts in enumerate(sol.t_events[:len(own)]) if len(ts)]
         if not fired:
             break
@@ -163,6 +182,8 @@ def integrate_with_impacts(model, c, rhs, p, grid, y0, method, rtol, atol, event
             if captured or -res.normal_velocity_before[j] >= capture_velocity:  # round-off touches are no impacts
                 impacts.append(_record(model, t, name, res, u, u_new, captured, q, p, joint_impulses))
         u_new = sequential_impacts(model, c, p, t, q, u_new, rhs, impacts, resolve)
+        if c.m:
+            q, u_new = project(c, p, t, q, u_new)
         y = np.concatenate([q, u_new])
         times.append(t)
         states.append(y)

@@ -13,7 +13,8 @@ from mechsys.errors import AnalysisError
 if TYPE_CHECKING:  # sympy and the model are imported only where used: a warm run (analysis/warm.py) needs neither
     from mechsys.mechanics.model import MechanicalModel
 
-METHODS = ("auto", "native", "RK45", "DOP853", "Radau", "BDF", "LSODA")
+METHODS = ("auto", "native", "CVODE", "RK45", "DOP853", "Radau", "BDF", "LSODA")
+CVODE_TIGHTENING = 100.0  # auto runs CVODE at rtol/100: at equal rtol its error is 30-100x Radau's (benchmarks/stiff.py)
 
 
 @dataclass
@@ -233,11 +234,39 @@ def stiffness(rhs: RightHandSide, t0: float, y0: np.ndarray, t_end: float) -> tu
 
 
 def choose_method(rhs: RightHandSide, t0: float, y0: np.ndarray, t_end: float,
-                  native_ok: bool = False) -> tuple[str, str]:
+                  native_ok: bool = False, cvode_ok: bool = False) -> tuple[str, str]:
     radius, steps_needed = stiffness(rhs, t0, y0, t_end)
     if steps_needed > 5e4:
-        return "Radau", f"stiff: fastest decay rate {radius:.3g} 1/s over {t_end - t0:g} s"
+        why = f"stiff: fastest decay rate {radius:.3g} 1/s over {t_end - t0:g} s"
+        return ("CVODE", why + f"; SUNDIALS BDF at rtol/{CVODE_TIGHTENING:g}") if cvode_ok else ("Radau", why)
     return ("native" if native_ok else "DOP853"), f"non-stiff: fastest decay rate {radius:.3g} 1/s"
+
+
+def cvode_usable(c: Compiled, required: bool) -> bool:
+    """SUNDIALS CVODE (scikit-sundae) for this scene: installed, and no contacts (the impact loop uses scipy)."""
+    from mechsys.analysis import sundials
+
+    why = None
+    if not sundials.available():
+        why = "scikit-sundae is not installed (pip install mechsys[sundials])"
+    elif c.gap_names:
+        why = "contacts need scipy's event loop"
+    if why is not None and required:
+        raise AnalysisError(f"--method CVODE: {why}; use Radau")
+    return why is None
+
+
+def ivp_solver(chosen: str):
+    """solve_ivp, or CVODE behind the same call signature (the subset simulate uses)."""
+    if chosen != "CVODE":
+        from scipy.integrate import solve_ivp
+
+        return solve_ivp
+    from mechsys.analysis import sundials
+
+    def cvode(fun, t_span, y0, method=None, rtol=1e-10, atol=1e-12, t_eval=None, events=None):
+        return sundials.integrate(fun, t_span, y0, t_eval=t_eval, rtol=rtol, atol=atol, events=events)
+    return cvode
 
 
 def native_integrator(model: MechanicalModel, c: Compiled, required: bool):
@@ -315,8 +344,13 @@ def simulate(model: MechanicalModel, t_end: float, dt: float | None = None, meth
     if nat is not None and not nat.from_cache:
         timings["compile native"] = time.perf_counter() - t1
     if method == "auto":
-        chosen, why = choose_method(rhs, 0.0, np.concatenate([q0, u0]), t_end, native_ok=nat is not None)
+        chosen, why = choose_method(rhs, 0.0, np.concatenate([q0, u0]), t_end, native_ok=nat is not None,
+                                    cvode_ok=cvode_usable(c, False))
         warnings.append(f"auto method: {chosen} ({why})")
+        if chosen == "CVODE":
+            rtol, atol = rtol / CVODE_TIGHTENING, atol / CVODE_TIGHTENING
+    elif method == "CVODE":
+        cvode_usable(c, True)
     dt = dt or t_end / 1000
     grid = np.arange(0.0, t_end + 0.5 * dt, dt)
     grid[-1] = min(grid[-1], t_end)
@@ -327,8 +361,6 @@ def simulate(model: MechanicalModel, t_end: float, dt: float | None = None, meth
     event_fns = _event_functions(model, c, p)
     recorded: list[dict] = []
     impacts: list[dict] = []
-    if c.gap_names and c.m:
-        raise AnalysisError("impacts in closed-loop simulations are not supported yet")
 
     def note_events(sol) -> bool:
         """Record the crossings of this solve; True when a stopping event fired."""
@@ -352,9 +384,9 @@ def simulate(model: MechanicalModel, t_end: float, dt: float | None = None, meth
             warnings.append(f"native: [[M, A^T], [A, 0]] is singular at t = {steps:.6g} (redundant constraints?); "
                             "continuing with DOP853 and least squares")
             chosen, steps = "DOP853", 0
-    if c.m and chosen != "native":
+    if c.m and not c.gap_names and chosen != "native":
         # closed loops: integrate output interval by output interval and project onto the constraints
-        from scipy.integrate import solve_ivp  # imported where used: the native path never needs it
+        solve_ivp = ivp_solver(chosen)  # imported where used: the native path never needs scipy.integrate
 
         y = ys[0]
         times = [0.0]
@@ -373,7 +405,7 @@ def simulate(model: MechanicalModel, t_end: float, dt: float | None = None, meth
                 note_events(sol)
         Y = np.array(ys)
         grid = np.array(times)
-    elif c.m:
+    elif c.m and not c.gap_names:
         grid = grid[:len(Y)]
     elif chosen == "native":
         run = nat.run(p, ys[0], grid, rtol, atol, progress)
@@ -388,8 +420,7 @@ def simulate(model: MechanicalModel, t_end: float, dt: float | None = None, meth
         grid, Y, steps, impacts, stopped = integrate_with_impacts(model, c, rhs, p, grid, ys[0], chosen, rtol, atol,
                                                                    event_fns, note_events, capture_velocity)
     else:
-        from scipy.integrate import solve_ivp
-
+        solve_ivp = ivp_solver(chosen)
         sol = solve_ivp(rhs, (0.0, float(grid[-1])), ys[0], method=chosen, t_eval=grid, rtol=rtol, atol=atol,
                         events=event_fns or None)
         if not sol.success:
