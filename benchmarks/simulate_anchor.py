@@ -33,7 +33,7 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
 sys.path.insert(0, str(HERE))
-from derive_chain import PARAMS, chain_yaml  # noqa: E402  (the same models as the derivation benchmark)
+from derive_chain import PARAMS, chain_yaml, kane_chain  # noqa: E402  (the models of the derivation benchmark)
 
 TARGET_ERROR = 1e-6
 TOLERANCES = [10.0 ** -k for k in range(4, 14)]
@@ -52,35 +52,10 @@ def anchor(n: int):
     """The hand-glued pipeline with absolute angles (the usual script; cheaper for sympy than relative ones).
     Returns (rhs(t, y) in absolute angles, seconds to derive and lambdify)."""
     import sympy as sp
-    from sympy.physics.mechanics import KanesMethod, Point, ReferenceFrame, RigidBody, dynamicsymbols, inertia
 
     t0 = time.perf_counter()
-    q = dynamicsymbols(f"q1:{n + 1}")
-    u = dynamicsymbols(f"u1:{n + 1}")
-    m, l, g = sp.symbols("m l g")
-    N = ReferenceFrame("N")
-    O = Point("O")
-    O.set_vel(N, 0)
-    joint, prev, bodies, loads = O, None, [], []
-    for k in range(n):
-        A = ReferenceFrame(f"A{k + 1}")
-        A.orient_axis(N, N.z, q[k])
-        A.set_ang_vel(N, u[k] * N.z)
-        if k > 0:
-            P = Point(f"P{k + 1}")
-            P.set_pos(joint, l * prev.x)
-            P.v2pt_theory(joint, N, prev)
-            joint = P
-        G = Point(f"G{k + 1}")
-        G.set_pos(joint, l / 2 * A.x)
-        G.v2pt_theory(joint, N, A)
-        Izz = m * l ** 2 / 12
-        bodies.append(RigidBody(f"link{k + 1}", G, A, m, (inertia(A, 0, Izz, Izz), G)))
-        loads.append((G, -m * g * N.y))
-        prev = A
-    kane = KanesMethod(N, q_ind=q, u_ind=u, kd_eqs=[qk.diff() - uk for qk, uk in zip(q, u)])
-    kane.kanes_equations(bodies, loads)
-    fn = sp.lambdify((q, u, [m, l, g]), [kane.mass_matrix, kane.forcing], cse=True)
+    kane, q, u, params = kane_chain(n, "absolute")
+    fn = sp.lambdify((q, u, params), [kane.mass_matrix, kane.forcing], cse=True)
     p = list(PARAMS.values())
 
     def rhs(t, y):

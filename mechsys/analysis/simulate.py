@@ -37,6 +37,7 @@ class Compiled:
     gap_A: object = None  # their normal-velocity Jacobians (persistent-contact rows)
     gap_b: object = None
     gap_names: list = field(default_factory=list)
+    native: object = None  # the loaded native integrator (numeric/native.py), once asked for
 
 
 def _contact_sources(model: MechanicalModel, args) -> dict:
@@ -285,7 +286,9 @@ def native_integrator(model: MechanicalModel, c: Compiled, required: bool):
         if required:
             raise AnalysisError(f"--method native: {why}; use DOP853")
         return None
-    return native.load(model)
+    if getattr(c, "native", None) is None:  # kept with the compiled code, which with_overrides clones share
+        c.native = native.load(model)
+    return c.native
 
 
 def _native_projected(nat, c: Compiled, p: np.ndarray, grid: np.ndarray, y0: np.ndarray, rtol: float, atol: float,
@@ -331,9 +334,17 @@ def simulate(model: MechanicalModel, t_end: float, dt: float | None = None, meth
     p = parameter_values(model) if overrides_p is None else overrides_p
     q0 = np.array([model.doc.initial[n] for n in model.coordinates], dtype=float)
     u0 = np.array([model.doc.initial_rate[n] for n in model.coordinates], dtype=float)
+    guess_q, guess_u = q0, u0
     q0, u0 = project(c, p, 0.0, q0, u0)
     rhs = RightHandSide(c, p, progress)
     warnings = []
+    moved = [f"{name} = {qa:.10g} (guess {qg:.10g})" for name, qa, qg in zip(model.coordinates, q0, guess_q)
+             if abs(qa - qg) > 1e-9 * (1 + abs(qg))]
+    moved += [f"der({name}) = {ua:.10g} (given {ug:.10g})" for name, ua, ug in zip(model.coordinates, u0, guess_u)
+              if abs(ua - ug) > 1e-9 * (1 + abs(ug))]
+    if moved:
+        warnings.append("initial state assembled onto the constraints by Newton from the file's values (the "
+                        "branch nearest them): " + ", ".join(moved))
     M0, _ = c.eqs.evaluate(0.0, q0, u0, p)
     cond = np.linalg.cond(M0) if M0.size else 1.0
     if cond > 1e8:

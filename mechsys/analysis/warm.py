@@ -90,7 +90,7 @@ def remember(path: Path, overrides: Sequence[str], model, result: SimulationResu
     from mechsys.analysis.equilibria import parameter_values
     from mechsys.analysis.simulate import RightHandSide, compile_model, stiffness
 
-    nat = getattr(model, "_native_integrator", None)
+    nat = compile_model(model).native
     entry = cache.load(cache.model_key(model, "simulate"))
     if nat is None or entry is None:
         return
