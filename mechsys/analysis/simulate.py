@@ -235,11 +235,12 @@ def stiffness(rhs: RightHandSide, t0: float, y0: np.ndarray, t_end: float) -> tu
 
 
 def choose_method(rhs: RightHandSide, t0: float, y0: np.ndarray, t_end: float,
-                  native_ok: bool = False, cvode_ok: bool = False) -> tuple[str, str]:
+                  native_ok: bool = False, cvode_ok=lambda: False) -> tuple[str, str]:
+    """auto's choice; ``cvode_ok()`` is asked only for a stiff scene (importing scikit-sundae costs ~0.4 s)."""
     radius, steps_needed = stiffness(rhs, t0, y0, t_end)
     if steps_needed > 5e4:
         why = f"stiff: fastest decay rate {radius:.3g} 1/s over {t_end - t0:g} s"
-        return ("CVODE", why + f"; SUNDIALS BDF at rtol/{CVODE_TIGHTENING:g}") if cvode_ok else ("Radau", why)
+        return ("CVODE", why + f"; SUNDIALS BDF at rtol/{CVODE_TIGHTENING:g}") if cvode_ok() else ("Radau", why)
     return ("native" if native_ok else "DOP853"), f"non-stiff: fastest decay rate {radius:.3g} 1/s"
 
 
@@ -356,7 +357,7 @@ def simulate(model: MechanicalModel, t_end: float, dt: float | None = None, meth
         timings["compile native"] = time.perf_counter() - t1
     if method == "auto":
         chosen, why = choose_method(rhs, 0.0, np.concatenate([q0, u0]), t_end, native_ok=nat is not None,
-                                    cvode_ok=cvode_usable(c, False))
+                                    cvode_ok=lambda: cvode_usable(c, False))
         warnings.append(f"auto method: {chosen} ({why})")
         if chosen == "CVODE":
             rtol, atol = rtol / CVODE_TIGHTENING, atol / CVODE_TIGHTENING
