@@ -14,11 +14,12 @@ $(STAMP): pyproject.toml
 
 install: $(STAMP)
 
-## demo: install, then derive, describe and analyse the bundled centrifuge (Krodkiewski ch. 5)
+## demo: install, then derive, describe, analyse and simulate the bundled centrifuge (Krodkiewski ch. 5)
 demo: $(STAMP)
 	$(BIN)/mechsys info systems/centrifuge.yaml
 	$(BIN)/mechsys derive systems/centrifuge.yaml --check
 	$(BIN)/mechsys equilibria systems/centrifuge.yaml
+	$(BIN)/mechsys simulate systems/centrifuge.yaml --t-end 60
 
 ## test: install, run the textbook checks of every bundled model, then the whole suite (slow tests included)
 test: $(STAMP)
