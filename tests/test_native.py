@@ -24,8 +24,9 @@ pytestmark = pytest.mark.skipif(native.compiler() is None, reason="no C compiler
 
 UNCONSTRAINED = [SYSTEMS_DIR / f"{n}.yaml" for n in ("double_pendulum", "cart_pendulum", "centrifuge", "motor_arm",
                                                     "problem57", "spring_chain", "bullet_pendulum", "newton_cradle")]
-UNCONSTRAINED += [DATA_DIR / f"{n}.yaml" for n in ("torque_free_body", "two_free_bodies", "free_free_chain",
-                                                  "beads_string", "friction_sphere_3d", "p51_racket", "stiff_chain")]
+UNCONSTRAINED += [DATA_DIR / f"{n}.yaml" for n in ("native_functions", "torque_free_body", "two_free_bodies",
+                                                  "free_free_chain", "beads_string", "friction_sphere_3d", "p51_racket",
+                                                  "stiff_chain")]
 
 
 def _initial(model):
