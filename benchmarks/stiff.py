@@ -48,8 +48,7 @@ sys.path.insert(0, str(REPO))
 
 import mechsys  # noqa: E402
 from mechsys.analysis import sundials  # noqa: E402
-from mechsys.analysis.equilibria import parameter_values  # noqa: E402
-from mechsys.analysis.simulate import RightHandSide, choose_method, compile_model, project  # noqa: E402
+from mechsys.analysis.simulate import RightHandSide, choose_method, initial_state  # noqa: E402
 
 SCENES = [("stiff_chain", REPO / "tests/data/stiff_chain.yaml", 2.0),
           ("damped_pendulum_chain", REPO / "tests/data/damped_pendulum_chain.yaml", 10.0)]
@@ -59,14 +58,8 @@ AGREE = 1e-6  # CVODE at rtol 1e-10 against the reference, err(grid)
 
 def scene(path: Path, t_end: float) -> tuple:
     """Compiled equations, parameters, consistent initial state and output grid, as simulate() builds them."""
-    model = mechsys.load(path)
-    c = compile_model(model)
-    p = parameter_values(model)
-    q0 = np.array([model.doc.initial[n] for n in model.coordinates], dtype=float)
-    u0 = np.array([model.doc.initial_rate[n] for n in model.coordinates], dtype=float)
-    q0, u0 = project(c, p, 0.0, q0, u0)
-    grid = np.linspace(0.0, t_end, 1001)
-    return c, p, np.concatenate([q0, u0]), grid
+    c, p, y0 = initial_state(mechsys.load(path))
+    return c, p, y0, np.linspace(0.0, t_end, 1001)
 
 
 def run(method: str, c, p, y0: np.ndarray, grid: np.ndarray, rtol: float, atol: float) -> dict:

@@ -15,7 +15,7 @@ from scipy.integrate import solve_ivp
 
 import mechsys
 from mechsys.analysis.equilibria import parameter_values
-from mechsys.analysis.simulate import RightHandSide, compile_model, simulate
+from mechsys.analysis.simulate import RightHandSide, compile_model, initial_state, simulate
 from mechsys.errors import AnalysisError
 from mechsys.numeric import native
 from tests.helpers import DATA_DIR, ROOT, SYSTEMS_DIR, load_data, load_system
@@ -29,10 +29,6 @@ UNCONSTRAINED += [DATA_DIR / f"{n}.yaml" for n in ("native_functions", "torque_f
                                                   "stiff_chain")]
 
 
-def _initial(model):
-    q0 = np.array([model.doc.initial[n] for n in model.coordinates], dtype=float)
-    u0 = np.array([model.doc.initial_rate[n] for n in model.coordinates], dtype=float)
-    return np.concatenate([q0, u0])
 
 
 @pytest.mark.parametrize("path", UNCONSTRAINED, ids=lambda p: p.stem)
@@ -55,9 +51,7 @@ def test_native_accelerations_equal_python_path(path):
 def test_native_takes_scipys_dop853_steps(name, t_end):
     """Same step-size control, initial step and dense output as scipy's DOP853: same states to rounding."""
     model = load_system(name)
-    c = compile_model(model)
-    p = parameter_values(model)
-    y0 = _initial(model)
+    c, p, y0 = initial_state(model)
     grid = np.linspace(0.0, t_end, 501)
     run = native.load(model).run(p, y0, grid, 1e-10, 1e-12)
     sol = solve_ivp(RightHandSide(c, p), (0.0, t_end), y0, method="DOP853", t_eval=grid, rtol=1e-10, atol=1e-12)

@@ -12,8 +12,7 @@ pytest.importorskip("sksundae")
 
 import mechsys  # noqa: E402
 from mechsys.analysis import sundials  # noqa: E402
-from mechsys.analysis.equilibria import parameter_values  # noqa: E402
-from mechsys.analysis.simulate import RightHandSide, compile_model, project  # noqa: E402
+from mechsys.analysis.simulate import RightHandSide, initial_state  # noqa: E402
 from mechsys.errors import AnalysisError  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -21,13 +20,8 @@ ROOT = Path(__file__).resolve().parent.parent
 
 def _scene(path: Path) -> tuple[RightHandSide, np.ndarray]:
     """The compiled right-hand side and consistent initial state, built as simulate() builds them."""
-    model = mechsys.load(path)
-    c = compile_model(model)
-    p = parameter_values(model)
-    q0 = np.array([model.doc.initial[n] for n in model.coordinates], dtype=float)
-    u0 = np.array([model.doc.initial_rate[n] for n in model.coordinates], dtype=float)
-    q0, u0 = project(c, p, 0.0, q0, u0)
-    return RightHandSide(c, p), np.concatenate([q0, u0])
+    c, p, y0 = initial_state(mechsys.load(path))
+    return RightHandSide(c, p), y0
 
 
 def test_available() -> None:

@@ -328,8 +328,8 @@ def centre_of_percussion(model: MechanicalModel, link: str | None = None) -> dic
     from mechsys.mechanics.kinematics import AXES
 
     axis = np.array(AXES[spec.joint.axis] if isinstance(spec.joint.axis, str) else
-                    [float(sp.sympify(x).xreplace(values)) if not isinstance(x, (int, float)) else x
-                     for x in spec.joint.axis], dtype=float)
+                    model.doc.parse_vec(spec.joint.axis, ("links", j.link, "joint", "axis"), "parameter")
+                    .xreplace(values), dtype=float).ravel()
     axis = axis / np.linalg.norm(axis)
     c = np.array(body.com_local.xreplace(values), dtype=float).ravel()
     m = float(sp.sympify(body.mass).xreplace(values))

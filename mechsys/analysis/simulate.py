@@ -14,7 +14,8 @@ if TYPE_CHECKING:  # sympy and the model are imported only where used: a warm ru
     from mechsys.mechanics.model import MechanicalModel
 
 METHODS = ("auto", "native", "CVODE", "RK45", "DOP853", "Radau", "BDF", "LSODA")
-CVODE_TIGHTENING = 100.0  # auto runs CVODE at rtol/100: at equal rtol its error is 30-100x Radau's (benchmarks/stiff.py)
+# auto runs CVODE at rtol/100: at equal rtol its error is 30-100x Radau's (benchmarks/stiff.py)
+CVODE_TIGHTENING = 100.0
 
 
 @dataclass
@@ -184,6 +185,23 @@ class RightHandSide:
         return np.concatenate([u, a])
 
 
+def file_state(model: MechanicalModel) -> tuple[np.ndarray, np.ndarray]:
+    """The initial coordinates and rates as the file (and --set) give them, before assembly onto constraints."""
+    q0 = np.array([model.doc.initial[n] for n in model.coordinates], dtype=float)
+    u0 = np.array([model.doc.initial_rate[n] for n in model.coordinates], dtype=float)
+    return q0, u0
+
+
+def initial_state(model: MechanicalModel) -> tuple[Compiled, np.ndarray, np.ndarray]:
+    """(compiled code, parameter values, consistent initial state y0 = (q0, u0)), as ``simulate`` starts."""
+    from mechsys.analysis.equilibria import parameter_values
+
+    c = compile_model(model)
+    p = parameter_values(model)
+    q0, u0 = project(c, p, 0.0, *file_state(model))
+    return c, p, np.concatenate([q0, u0])
+
+
 def project(c: Compiled, p: np.ndarray, t: float, q: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Closest consistent state: Gauss-Newton on Phi(q, t) = 0 (minimum-norm steps), then A u = -(A u)_t part."""
     if c.m == 0:
@@ -333,10 +351,8 @@ def simulate(model: MechanicalModel, t_end: float, dt: float | None = None, meth
     timings["derive + compile" if not getattr(c, "cache_hit", False) else "load compiled code (cached)"] = \
         time.perf_counter() - t0
     p = parameter_values(model) if overrides_p is None else overrides_p
-    q0 = np.array([model.doc.initial[n] for n in model.coordinates], dtype=float)
-    u0 = np.array([model.doc.initial_rate[n] for n in model.coordinates], dtype=float)
-    guess_q, guess_u = q0, u0
-    q0, u0 = project(c, p, 0.0, q0, u0)
+    guess_q, guess_u = file_state(model)
+    q0, u0 = project(c, p, 0.0, guess_q, guess_u)
     rhs = RightHandSide(c, p, progress)
     warnings = []
     moved = [f"{name} = {qa:.10g} (guess {qg:.10g})" for name, qa, qg in zip(model.coordinates, q0, guess_q)
