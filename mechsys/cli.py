@@ -370,6 +370,9 @@ def simulate(
     impacts_file: Optional[Path] = typer.Option(None, "--impacts", help="Write the impact table (.csv or .json)."),
     capture: float = typer.Option(1e-10, "--capture-velocity",
                                   help="Rest rule: slower impacts are plastic and the contact stays closed."),
+    max_steps: float = typer.Option(1e6, "--max-steps",
+                                    help="Work budget: integrator steps (20x as many RHS evaluations for scipy "
+                                         "and CVODE); a run that needs more stops with the reason."),
     reactions: bool = typer.Option(False, "--reactions",
                                    help="Add joint reactions reaction(LINK).Fx..Mz (ground axes) to the result file."),
     fmt: TableFormat = typer.Option(TableFormat.text, "--format", "-f", help="Format of the summary."),
@@ -397,14 +400,15 @@ def simulate(
         # a repeated run of the same file and options starts warm (no sympy, no scipy), unless an option needs
         # the symbolic model
         result = None if (animate or reactions) else warm.run_planned(file, set_ or [], t_end, dt, method, rtol,
-                                                                       atol, bar)
+                                                                       atol, bar, max_steps)
         if result is None:
             import mechsys
             from mechsys.model.load import parse_assignments
 
             # prescribed coordinates are released into drive constraints so their driving forces are outputs
             model = mechsys.load(file, parse_assignments(set_), release_prescribed=True)
-            result = run_simulation(model, t_end, dt, method, rtol, atol, capture_velocity=capture, progress=bar)
+            result = run_simulation(model, t_end, dt, method, rtol, atol, capture_velocity=capture, progress=bar,
+                                    max_steps=max_steps)
             warm.remember(file, set_ or [], model, result)
         bar.close()
         result.timings = {"load": _time.perf_counter() - t0 - sum(result.timings.values()), **result.timings}

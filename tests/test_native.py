@@ -183,3 +183,15 @@ def test_assembly_from_rough_guesses_reports_the_branch(tmp_path):
     assert np.max(r.residual) <= 1e-10
     quiet = simulate(load_system("four_bar"), 0.1)
     assert not [w for w in quiet.warnings if w.startswith("initial state assembled")]
+
+
+def test_a_chattering_discontinuous_law_spends_the_step_budget_and_says_why(tmp_path):
+    """sign(der(x)) friction sticks at x' = 0, where the ODE has no classical solution: an explicit integrator
+    chatters with steps near the rounding limit. The run stops at the budget with the reason (exit 1), instead of
+    running for hours."""
+    proc = subprocess.run([sys.executable, "-m", "mechsys", "simulate", str(DATA_DIR / "native_functions.yaml"),
+                           "--t-end", "3", "--max-steps", "20000"], capture_output=True, text=True, cwd=ROOT,
+                          env={**os.environ, "MECHSYS_CACHE": str(tmp_path)})
+    assert proc.returncode == 1
+    assert "step budget (--max-steps)" in proc.stderr and "Traceback" not in proc.stderr
+    assert len(proc.stderr.strip().splitlines()) == 1

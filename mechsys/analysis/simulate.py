@@ -14,6 +14,9 @@ if TYPE_CHECKING:  # sympy and the model are imported only where used: a warm ru
     from mechsys.mechanics.model import MechanicalModel
 
 METHODS = ("auto", "native", "CVODE", "RK45", "DOP853", "Radau", "BDF", "LSODA")
+EVALUATIONS_PER_STEP = 20  # the scipy and CVODE paths count the step budget in right-hand-side evaluations
+BUDGET_SPENT = ("the step budget (--max-steps) is spent: a stiff scene (try --method Radau or CVODE) or a discontinuous "
+                "law such as sign() of a rate that the integrator chatters on")
 # auto runs CVODE at rtol/100: at equal rtol its error is 30-100x Radau's (benchmarks/stiff.py)
 CVODE_TIGHTENING = 100.0
 
@@ -147,10 +150,11 @@ class SimulationResult:
 class RightHandSide:
     """y' = g(t, y) for y = (q, u); with constraints the accelerations solve [[M, A^T], [A, 0]] [q''; -lambda] = [f; b]."""
 
-    def __init__(self, c: Compiled, p: np.ndarray, progress=None) -> None:
+    def __init__(self, c: Compiled, p: np.ndarray, progress=None, max_calls: float = float("inf")) -> None:
         self.c = c
         self.p = p
         self.calls = 0
+        self.max_calls = max_calls  # the step budget of the scipy and CVODE paths, in evaluations
         self.persistent = []
         self.progress = progress  # progress(t), called every 200 evaluations
 
@@ -177,6 +181,8 @@ class RightHandSide:
 
     def __call__(self, t: float, y: np.ndarray) -> np.ndarray:
         self.calls += 1
+        if self.calls > self.max_calls:
+            raise AnalysisError(f"integration stopped at t = {t:.6g}: {BUDGET_SPENT}")
         if self.progress is not None and self.calls % 200 == 0:
             self.progress(t)
         n = self.c.n
@@ -311,7 +317,7 @@ def native_integrator(model: MechanicalModel, c: Compiled, required: bool):
 
 
 def _native_projected(nat, c: Compiled, p: np.ndarray, grid: np.ndarray, y0: np.ndarray, rtol: float, atol: float,
-                      progress) -> tuple:
+                      progress, max_steps: float) -> tuple:
     """Closed loops on the compiled loop: one native solve per output interval (as the scipy path restarts
     solve_ivp), projection onto the constraints in between. Returns (Y, RHS calls, steps), or (None, calls, t) when
     the augmented matrix is singular at t."""
@@ -319,7 +325,7 @@ def _native_projected(nat, c: Compiled, p: np.ndarray, grid: np.ndarray, y0: np.
     ys, calls, steps = [y0], 0, 0
     y = y0
     for k, (a, b) in enumerate(zip(grid[:-1], grid[1:])):
-        run = nat.run(p, y, np.array([a, b]), rtol, atol)
+        run = nat.run(p, y, np.array([a, b]), rtol, atol, max_steps=max_steps - steps)
         calls += run.nfev
         steps += run.nsteps
         if run.status == -2:
@@ -336,9 +342,11 @@ def _native_projected(nat, c: Compiled, p: np.ndarray, grid: np.ndarray, y0: np.
 
 def simulate(model: MechanicalModel, t_end: float, dt: float | None = None, method: str = "auto",
              rtol: float = 1e-10, atol: float = 1e-12, overrides_p: np.ndarray | None = None,
-             capture_velocity: float = 1e-10, progress=None) -> SimulationResult:
+             capture_velocity: float = 1e-10, progress=None, max_steps: float = 1e6) -> SimulationResult:
     """Integrate from the file's initial state to t_end; outputs every dt (default t_end/1000).
-    ``progress(t)`` is called now and then with the time reached (for a progress bar)."""
+    ``progress(t)`` is called now and then with the time reached (for a progress bar). ``max_steps`` bounds the
+    work (the native loop's steps, or EVALUATIONS_PER_STEP times as many right-hand-side evaluations elsewhere), so
+    a chattering discontinuous law fails with a reason instead of running for hours."""
     if method not in METHODS:
         raise AnalysisError(f"unknown method {method!r}; use one of {', '.join(METHODS)}")
     if t_end <= 0:
@@ -353,7 +361,7 @@ def simulate(model: MechanicalModel, t_end: float, dt: float | None = None, meth
     p = parameter_values(model) if overrides_p is None else overrides_p
     guess_q, guess_u = file_state(model)
     q0, u0 = project(c, p, 0.0, guess_q, guess_u)
-    rhs = RightHandSide(c, p, progress)
+    rhs = RightHandSide(c, p, progress, EVALUATIONS_PER_STEP * max_steps)
     warnings = []
     moved = [f"{name} = {qa:.10g} (guess {qg:.10g})" for name, qa, qg in zip(model.coordinates, q0, guess_q)
              if abs(qa - qg) > 1e-9 * (1 + abs(qg))]
@@ -403,7 +411,7 @@ def simulate(model: MechanicalModel, t_end: float, dt: float | None = None, meth
         return stop
 
     if c.m and chosen == "native":
-        Y, calls, steps = _native_projected(nat, c, p, grid, ys[0], rtol, atol, progress)
+        Y, calls, steps = _native_projected(nat, c, p, grid, ys[0], rtol, atol, progress, max_steps)
         rhs.calls += calls
         if Y is None:  # a singular [[M, A^T], [A, 0]]: redundant constraints need the least-squares solve
             if method == "native":
@@ -436,7 +444,7 @@ def simulate(model: MechanicalModel, t_end: float, dt: float | None = None, meth
     elif c.m and not c.gap_names:
         grid = grid[:len(Y)]
     elif chosen == "native":
-        run = nat.run(p, ys[0], grid, rtol, atol, progress)
+        run = nat.run(p, ys[0], grid, rtol, atol, progress, max_steps=max_steps)
         if run.status:
             raise AnalysisError(f"integration failed at t = {run.t_reached:.6g}: {run.message}")
         rhs.calls += run.nfev

@@ -38,8 +38,8 @@ def plan_key(path: Path, overrides: Sequence[str]) -> Optional[str]:
 
 
 def run_planned(path: Path, overrides: Sequence[str], t_end: float, dt: Optional[float], method: str,
-                rtol: float, atol: float, progress: Optional[Callable[[float], None]] = None
-                ) -> Optional[SimulationResult]:
+                rtol: float, atol: float, progress: Optional[Callable[[float], None]] = None,
+                max_steps: float = 1e6) -> Optional[SimulationResult]:
     """The simulation from a stored plan, or None when there is no usable plan for this run (the caller then
     loads the model and runs `simulate`)."""
     if method not in ("auto", "native") or t_end <= 0:
@@ -67,7 +67,7 @@ def run_planned(path: Path, overrides: Sequence[str], t_end: float, dt: Optional
     grid = np.arange(0.0, t_end + 0.5 * dt, dt)
     grid[-1] = min(grid[-1], t_end)
     t1 = time.perf_counter()
-    run = nat.run(p, y0, grid, rtol, atol, progress)
+    run = nat.run(p, y0, grid, rtol, atol, progress, max_steps=max_steps)
     if run.status:
         return None  # let the full path report the failure with its context
     seconds = time.perf_counter() - t1

@@ -15,10 +15,10 @@
 #define MIN_FACTOR 0.2
 #define MAX_FACTOR 10.0
 
-enum { OK = 0, STEP_TOO_SMALL = -1, SINGULAR = -2, NOT_FINITE = -3, PAST_END = -4 };
+enum { OK = 0, STEP_TOO_SMALL = -1, SINGULAR = -2, NOT_FINITE = -3, PAST_END = -4, TOO_MANY_STEPS = -5 };
 
 typedef struct {
-    double t, t_old, t_bound, h_abs, h_prev, rtol, atol;
+    double t, t_old, t_bound, h_abs, h_prev, rtol, atol, max_steps;
     double y[NY], y_old[NY], f[NY];
     double K[NEXT][NY];
     double F[NDENSE][NY];
@@ -158,8 +158,9 @@ static int initial_step(state_t *s, const double *p, double *h_out) {
 }
 
 int mechsys_start(state_t *s, double t0, double t_bound, const double *y0, const double *p, double rtol,
-                  double atol) {
+                  double atol, double max_steps) {
     memset(s, 0, sizeof *s);
+    s->max_steps = max_steps;
     s->t = s->t_old = t0;
     s->t_bound = t_bound;
     s->rtol = rtol;
@@ -178,6 +179,7 @@ static int step(state_t *s, const double *p) {
     int accepted = 0, rejected = 0;
     while (!accepted) {
         if (h_abs < min_step) return STEP_TOO_SMALL;
+        if ((double)(s->nsteps + s->nrejected) >= s->max_steps) return TOO_MANY_STEPS;
         h = h_abs;
         t_new = t + h;
         if (t_new > s->t_bound) t_new = s->t_bound;

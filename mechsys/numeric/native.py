@@ -24,7 +24,9 @@ TEMPLATE = Path(__file__).with_name("dop853.c")
 _STATUS = {-1: "the step size became too small",
            -2: "the mass matrix (or, with constraints, [[M, A^T], [A, 0]]: redundant constraints or a singular "
                "configuration) is singular",
-           -3: "the state or its derivative is not finite", -4: "an output time lies past the end"}
+           -3: "the state or its derivative is not finite", -4: "an output time lies past the end",
+           -5: "the step budget (--max-steps) is spent: a stiff scene (try --method Radau or CVODE) or a "
+               "discontinuous law such as sign() of a rate that the integrator chatters on"}  # = simulate.BUDGET_SPENT
 
 
 def compiler() -> Optional[str]:
@@ -175,7 +177,7 @@ class NativeIntegrator:
         lib.mechsys_state_bytes.restype = ctypes.c_int
         lib.mechsys_size.restype = ctypes.c_int
         lib.mechsys_start.argtypes = [ctypes.c_void_p, ctypes.c_double, ctypes.c_double, dp, dp, ctypes.c_double,
-                                      ctypes.c_double]
+                                      ctypes.c_double, ctypes.c_double]
         lib.mechsys_advance.argtypes = [ctypes.c_void_p, dp, ctypes.c_int, dp, dp, ctypes.POINTER(ctypes.c_int)]
         lib.mechsys_counters.argtypes = [ctypes.c_void_p, dp]
         lib.mechsys_accelerations.argtypes = [ctypes.c_double, dp, dp, dp]
@@ -197,16 +199,18 @@ class NativeIntegrator:
         return a
 
     def run(self, p: np.ndarray, y0: np.ndarray, t_out: np.ndarray, rtol: float, atol: float,
-            progress: Optional[Callable[[float], None]] = None, chunk: int = 50) -> NativeRun:
+            progress: Optional[Callable[[float], None]] = None, chunk: int = 50,
+            max_steps: float = 1e6) -> NativeRun:
         """Integrate from t_out[0] to t_out[-1]; outputs at every t_out. ``progress(t)`` is called every ``chunk``
-        outputs (the loop itself never returns to Python between steps)."""
+        outputs (the loop itself never returns to Python between steps). At most ``max_steps`` steps (accepted
+        and rejected) are taken."""
         p = np.ascontiguousarray(p, dtype=float)
         y0 = np.ascontiguousarray(y0, dtype=float)
         t_out = np.ascontiguousarray(t_out, dtype=float)
         state = ctypes.create_string_buffer(self._state_bytes)
         Y = np.zeros((len(t_out), 2 * self.n))
         status = self._lib.mechsys_start(state, float(t_out[0]), float(t_out[-1]), self._ptr(y0), self._ptr(p),
-                                         float(rtol), float(atol))
+                                         float(rtol), float(atol), float(max_steps))
         written = 0
         done = ctypes.c_int(0)
         while status == 0 and written < len(t_out):
