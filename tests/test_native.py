@@ -195,3 +195,15 @@ def test_a_chattering_discontinuous_law_spends_the_step_budget_and_says_why(tmp_
     assert proc.returncode == 1
     assert "step budget (--max-steps)" in proc.stderr and "Traceback" not in proc.stderr
     assert len(proc.stderr.strip().splitlines()) == 1
+
+
+def test_an_unwritable_cache_folder_still_runs_native(tmp_path):
+    """MECHSYS_CACHE below a plain file cannot be created (even by root): the library is built in a temporary
+    folder instead, and the run succeeds."""
+    blocker = tmp_path / "a-file"
+    blocker.write_text("not a folder")
+    proc = subprocess.run([sys.executable, "-m", "mechsys", "simulate", str(SYSTEMS_DIR / "double_pendulum.yaml"),
+                           "--t-end", "1"], capture_output=True, text=True, cwd=ROOT,
+                          env={**os.environ, "MECHSYS_CACHE": str(blocker / "cache")})
+    assert proc.returncode == 0, proc.stderr
+    assert "native" in proc.stdout

@@ -9,8 +9,10 @@ from __future__ import annotations
 
 import ctypes
 import os
+import platform
 import shutil
 import subprocess
+import sys
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -237,13 +239,17 @@ def load(model) -> Optional[NativeIntegrator]:
     result = None
     if compiler() is not None:
         folder = cache.cache_dir()
-        key = cache.model_key(model, "native")
-        if folder is None:
-            folder = Path(tempfile.mkdtemp(prefix="mechsys-native-"))
-        target = folder / f"{key}.so"
+        # the library is machine code: the key names the platform as well as the model structure
+        key = cache.model_key(model, f"native-{sys.platform}-{platform.machine()}")
+        target = (folder or Path(tempfile.mkdtemp(prefix="mechsys-native-"))) / f"{key}.so"
         hit = target.exists()
         if not hit:
-            build(model_source(model), target)
+            source = model_source(model)
+            try:
+                build(source, target)
+            except OSError:  # a read-only or full cache folder only costs the reuse
+                target = Path(tempfile.mkdtemp(prefix="mechsys-native-")) / target.name
+                build(source, target)
         result = NativeIntegrator(target)
         result.from_cache = hit
     model._native_integrator = result
