@@ -340,6 +340,62 @@ def _native_projected(nat, c: Compiled, p: np.ndarray, grid: np.ndarray, y0: np.
     return np.array(ys), calls, steps
 
 
+def _start(model: MechanicalModel, c: Compiled, p: np.ndarray) -> tuple[np.ndarray, np.ndarray, list[str]]:
+    """The consistent initial state and what the summary should say about it (assembly, conditioning)."""
+    guess_q, guess_u = file_state(model)
+    q0, u0 = project(c, p, 0.0, guess_q, guess_u)
+    warnings = []
+    moved = [f"{name} = {qa:.10g} (guess {qg:.10g})" for name, qa, qg in zip(model.coordinates, q0, guess_q)
+             if abs(qa - qg) > 1e-9 * (1 + abs(qg))]
+    moved += [f"der({name}) = {ua:.10g} (given {ug:.10g})" for name, ua, ug in zip(model.coordinates, u0, guess_u)
+              if abs(ua - ug) > 1e-9 * (1 + abs(ug))]
+    if moved:
+        warnings.append("initial state assembled onto the constraints by Newton from the file's values (the "
+                        "branch nearest them): " + ", ".join(moved))
+    M0, _ = c.eqs.evaluate(0.0, q0, u0, p)
+    cond = np.linalg.cond(M0) if M0.size else 1.0
+    if cond > 1e8:
+        warnings.append(f"the mass matrix is badly conditioned (cond = {cond:.2e}): results may lose accuracy")
+    return q0, u0, warnings
+
+
+def _closed_loop_scipy(rhs: RightHandSide, c: Compiled, p: np.ndarray, grid: np.ndarray, y0: np.ndarray,
+                       method: str, rtol: float, atol: float, event_fns: list, note_events) -> tuple:
+    """Closed loops on scipy or CVODE: output interval by output interval, projected onto the constraints."""
+    solve_ivp = ivp_solver(method)
+    n = c.n
+    ys, times, steps, y = [y0], [0.0], 0, y0
+    for a, b in zip(grid[:-1], grid[1:]):
+        sol = solve_ivp(rhs, (a, b), y, method=method, rtol=rtol, atol=atol, events=event_fns or None)
+        if not sol.success:
+            raise AnalysisError(f"integration failed at t = {sol.t[-1]:.6g}: {sol.message}")
+        steps += len(sol.t) - 1
+        q, u = project(c, p, float(sol.t[-1]), sol.y[:n, -1], sol.y[n:, -1])
+        y = np.concatenate([q, u])
+        ys.append(y)
+        times.append(float(sol.t[-1]))
+        if note_events(sol) and sol.status == 1:
+            break
+    return np.array(times), np.array(ys), steps
+
+
+def _plain_scipy(rhs: RightHandSide, model: MechanicalModel, grid: np.ndarray, y0: np.ndarray, method: str,
+                 rtol: float, atol: float, event_fns: list, note_events) -> tuple:
+    """No constraints: one solve_ivp (or CVODE) call over the output grid; a stopping event ends the rows."""
+    sol = ivp_solver(method)(rhs, (0.0, float(grid[-1])), y0, method=method, t_eval=grid, rtol=rtol, atol=atol,
+                             events=event_fns or None)
+    if not sol.success:
+        raise AnalysisError(f"integration failed at t = {sol.t[-1]:.6g}: {sol.message}")
+    Y, grid = sol.y.T, sol.t
+    if note_events(sol) and sol.y_events is not None:
+        # a stopping event: the last output row is the state at the event
+        k, t_stop = min(((k, ts[-1]) for k, ts in enumerate(sol.t_events)
+                         if len(ts) and model.events[k][3] == "stop"), key=lambda kv: kv[1])
+        Y = np.vstack([Y[grid < t_stop], sol.y_events[k][-1]])
+        grid = np.append(grid[grid < t_stop], t_stop)
+    return grid, Y, len(sol.t)
+
+
 def simulate(model: MechanicalModel, t_end: float, dt: float | None = None, method: str = "auto",
              rtol: float = 1e-10, atol: float = 1e-12, overrides_p: np.ndarray | None = None,
              capture_velocity: float = 1e-10, progress=None, max_steps: float = 1e6) -> SimulationResult:
@@ -359,28 +415,16 @@ def simulate(model: MechanicalModel, t_end: float, dt: float | None = None, meth
     timings["derive + compile" if not getattr(c, "cache_hit", False) else "load compiled code (cached)"] = \
         time.perf_counter() - t0
     p = parameter_values(model) if overrides_p is None else overrides_p
-    guess_q, guess_u = file_state(model)
-    q0, u0 = project(c, p, 0.0, guess_q, guess_u)
+    q0, u0, warnings = _start(model, c, p)
+    y0 = np.concatenate([q0, u0])
     rhs = RightHandSide(c, p, progress, EVALUATIONS_PER_STEP * max_steps)
-    warnings = []
-    moved = [f"{name} = {qa:.10g} (guess {qg:.10g})" for name, qa, qg in zip(model.coordinates, q0, guess_q)
-             if abs(qa - qg) > 1e-9 * (1 + abs(qg))]
-    moved += [f"der({name}) = {ua:.10g} (given {ug:.10g})" for name, ua, ug in zip(model.coordinates, u0, guess_u)
-              if abs(ua - ug) > 1e-9 * (1 + abs(ug))]
-    if moved:
-        warnings.append("initial state assembled onto the constraints by Newton from the file's values (the "
-                        "branch nearest them): " + ", ".join(moved))
-    M0, _ = c.eqs.evaluate(0.0, q0, u0, p)
-    cond = np.linalg.cond(M0) if M0.size else 1.0
-    if cond > 1e8:
-        warnings.append(f"the mass matrix is badly conditioned (cond = {cond:.2e}): results may lose accuracy")
     chosen = method
     t1 = time.perf_counter()
     nat = native_integrator(model, c, required=method == "native") if method in ("auto", "native") else None
     if nat is not None and not nat.from_cache:
         timings["compile native"] = time.perf_counter() - t1
     if method == "auto":
-        chosen, why = choose_method(rhs, 0.0, np.concatenate([q0, u0]), t_end, native_ok=nat is not None,
+        chosen, why = choose_method(rhs, 0.0, y0, t_end, native_ok=nat is not None,
                                     cvode_ok=lambda: cvode_usable(c, False))
         warnings.append(f"auto method: {chosen} ({why})")
         if chosen == "CVODE":
@@ -392,8 +436,6 @@ def simulate(model: MechanicalModel, t_end: float, dt: float | None = None, meth
     grid[-1] = min(grid[-1], t_end)
     t1 = time.perf_counter()
     n = c.n
-    ys = [np.concatenate([q0, u0])]
-    steps = 0
     event_fns = _event_functions(model, c, p)
     recorded: list[dict] = []
     impacts: list[dict] = []
@@ -410,8 +452,9 @@ def simulate(model: MechanicalModel, t_end: float, dt: float | None = None, meth
                 stop = stop or action == "stop"
         return stop
 
-    if c.m and chosen == "native":
-        Y, calls, steps = _native_projected(nat, c, p, grid, ys[0], rtol, atol, progress, max_steps)
+    Y = None
+    if chosen == "native" and c.m:
+        Y, calls, steps = _native_projected(nat, c, p, grid, y0, rtol, atol, progress, max_steps)
         rhs.calls += calls
         if Y is None:  # a singular [[M, A^T], [A, 0]]: redundant constraints need the least-squares solve
             if method == "native":
@@ -419,57 +462,24 @@ def simulate(model: MechanicalModel, t_end: float, dt: float | None = None, meth
                                     "deficient (redundant constraints?); --method DOP853 solves it by least squares")
             warnings.append(f"native: [[M, A^T], [A, 0]] is singular at t = {steps:.6g} (redundant constraints?); "
                             "continuing with DOP853 and least squares")
-            chosen, steps = "DOP853", 0
-    if c.m and not c.gap_names and chosen != "native":
-        # closed loops: integrate output interval by output interval and project onto the constraints
-        solve_ivp = ivp_solver(chosen)  # imported where used: the native path never needs scipy.integrate
-
-        y = ys[0]
-        times = [0.0]
-        for a, b in zip(grid[:-1], grid[1:]):
-            sol = solve_ivp(rhs, (a, b), y, method=chosen, rtol=rtol, atol=atol, events=event_fns or None)
-            if not sol.success:
-                raise AnalysisError(f"integration failed at t = {sol.t[-1]:.6g}: {sol.message}")
-            steps += len(sol.t) - 1
-            q, u = project(c, p, float(sol.t[-1]), sol.y[:n, -1], sol.y[n:, -1])
-            y = np.concatenate([q, u])
-            ys.append(y)
-            times.append(float(sol.t[-1]))
-            if sol.status == 1 and note_events(sol):
-                break
-            if sol.status != 1:
-                note_events(sol)
-        Y = np.array(ys)
-        grid = np.array(times)
-    elif c.m and not c.gap_names:
-        grid = grid[:len(Y)]
+            chosen = "DOP853"
     elif chosen == "native":
-        run = nat.run(p, ys[0], grid, rtol, atol, progress, max_steps=max_steps)
+        run = nat.run(p, y0, grid, rtol, atol, progress, max_steps=max_steps)
         if run.status:
             raise AnalysisError(f"integration failed at t = {run.t_reached:.6g}: {run.message}")
         rhs.calls += run.nfev
-        steps = run.nsteps
-        Y = run.y
+        Y, steps = run.y, run.nsteps
+    if Y is not None:
+        grid = grid[:len(Y)]
     elif c.gap_names:
         from mechsys.analysis.impacts import integrate_with_impacts
 
-        grid, Y, steps, impacts, stopped = integrate_with_impacts(model, c, rhs, p, grid, ys[0], chosen, rtol, atol,
-                                                                   event_fns, note_events, capture_velocity)
+        grid, Y, steps, impacts, _stopped = integrate_with_impacts(model, c, rhs, p, grid, y0, chosen, rtol, atol,
+                                                                    event_fns, note_events, capture_velocity)
+    elif c.m:
+        grid, Y, steps = _closed_loop_scipy(rhs, c, p, grid, y0, chosen, rtol, atol, event_fns, note_events)
     else:
-        solve_ivp = ivp_solver(chosen)
-        sol = solve_ivp(rhs, (0.0, float(grid[-1])), ys[0], method=chosen, t_eval=grid, rtol=rtol, atol=atol,
-                        events=event_fns or None)
-        if not sol.success:
-            raise AnalysisError(f"integration failed at t = {sol.t[-1]:.6g}: {sol.message}")
-        steps = len(sol.t)
-        Y = sol.y.T
-        grid = sol.t
-        if note_events(sol) and sol.y_events is not None:
-            # a stopping event: the last output row is the state at the event
-            k, t_stop = min(((k, ts[-1]) for k, ts in enumerate(sol.t_events)
-                             if len(ts) and model.events[k][3] == "stop"), key=lambda kv: kv[1])
-            Y = np.vstack([Y[grid < t_stop], sol.y_events[k][-1]])
-            grid = np.append(grid[grid < t_stop], t_stop)
+        grid, Y, steps = _plain_scipy(rhs, model, grid, y0, chosen, rtol, atol, event_fns, note_events)
     timings["integrate"] = time.perf_counter() - t1
     q, u = Y[:, :n], Y[:, n:]
     T = np.array([c.T(t, qi, ui, p)[0, 0] for t, qi, ui in zip(grid, q, u)])
