@@ -56,7 +56,7 @@ def integrate_with_impacts(model, c, rhs, p, grid, y0, method, rtol, atol, event
     impacts: list[dict] = []
     times, states = [0.0], [y0]
     t, y = 0.0, y0.copy()
-    steps = 0
+    steps = None  # solve_ivp with t_eval does not tell its steps; the summary says n/a
     t_end = float(grid[-1])
     stopped = False
     guard = 0
@@ -116,7 +116,6 @@ def integrate_with_impacts(model, c, rhs, p, grid, y0, method, rtol, atol, event
                         **bound)
         if not sol.success:
             raise AnalysisError(f"integration failed at t = {sol.t[-1]:.6g}: {sol.message}")
-        steps += len(sol.t)
         if len(sol.t):
             times += list(sol.t)
             states += list(np.asarray(sol.y).T)

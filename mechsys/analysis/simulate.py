@@ -381,19 +381,30 @@ def _closed_loop_scipy(rhs: RightHandSide, c: Compiled, p: np.ndarray, grid: np.
 
 def _plain_scipy(rhs: RightHandSide, model: MechanicalModel, grid: np.ndarray, y0: np.ndarray, method: str,
                  rtol: float, atol: float, event_fns: list, note_events) -> tuple:
-    """No constraints: one solve_ivp (or CVODE) call over the output grid; a stopping event ends the rows."""
-    sol = ivp_solver(method)(rhs, (0.0, float(grid[-1])), y0, method=method, t_eval=grid, rtol=rtol, atol=atol,
-                             events=event_fns or None)
+    """No constraints: one solve_ivp (or CVODE) call over the output grid; a stopping event ends the rows.
+    scipy runs with dense output (the same per-step interpolants t_eval would use) so its steps can be counted."""
+    if method == "CVODE":
+        sol = ivp_solver(method)(rhs, (0.0, float(grid[-1])), y0, t_eval=grid, rtol=rtol, atol=atol,
+                                 events=event_fns or None)
+        Y, steps = sol.y.T, sol.nsteps
+    else:
+        sol = ivp_solver(method)(rhs, (0.0, float(grid[-1])), y0, method=method, rtol=rtol, atol=atol,
+                                 events=event_fns or None, dense_output=True)
+        Y, steps = None, len(sol.t) - 1
     if not sol.success:
         raise AnalysisError(f"integration failed at t = {sol.t[-1]:.6g}: {sol.message}")
-    Y, grid = sol.y.T, sol.t
+    if Y is None:
+        grid = grid[grid <= sol.t[-1]]
+        Y = sol.sol(grid).T
+    else:
+        grid = sol.t
     if note_events(sol) and sol.y_events is not None:
         # a stopping event: the last output row is the state at the event
         k, t_stop = min(((k, ts[-1]) for k, ts in enumerate(sol.t_events)
                          if len(ts) and model.events[k][3] == "stop"), key=lambda kv: kv[1])
         Y = np.vstack([Y[grid < t_stop], sol.y_events[k][-1]])
         grid = np.append(grid[grid < t_stop], t_stop)
-    return grid, Y, len(sol.t)
+    return grid, Y, steps
 
 
 def simulate(model: MechanicalModel, t_end: float, dt: float | None = None, method: str = "auto",

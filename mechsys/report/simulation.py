@@ -143,6 +143,7 @@ def summary_table(result) -> list[Table]:
     t = Table("simulation summary", ["quantity", "value"])
     t.add("method", result.method)
     t.add("output points", len(result.t))
+    t.add("integrator steps", result.steps if result.steps is not None else "n/a")
     t.add("RHS evaluations", result.rhs_evaluations)
     for c, q, u in zip(result.coordinates, result.q[-1], result.u[-1]):
         t.add(f"{c}(t_end)", float(q))
