@@ -495,8 +495,9 @@ def simulate(model: MechanicalModel, t_end: float, dt: float | None = None, meth
     q, u = Y[:, :n], Y[:, n:]
     T = np.array([c.T(t, qi, ui, p)[0, 0] for t, qi, ui in zip(grid, q, u)])
     V = np.array([c.V(t, qi, ui, p)[0, 0] for t, qi, ui in zip(grid, q, u)])
-    if c.m and c.phi(0.0, q[0], u[0], p).size:
-        res = np.array([np.max(np.abs(c.phi(t, qi, ui, p))) for t, qi, ui in zip(grid, q, u)])
+    if c.m:  # positions |Phi| and velocities |A q' + a_t| (the only residual of rolling constraints)
+        res = np.array([max(np.max(np.abs(c.phi(t, qi, ui, p)), initial=0.0), np.max(np.abs(c.cv(t, qi, ui, p))))
+                        for t, qi, ui in zip(grid, q, u)])
     else:
         res = np.zeros(len(grid))
     driving = {}
