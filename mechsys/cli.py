@@ -381,9 +381,6 @@ def simulate(
     """Integrate the equations of motion from the file's initial state and report speed and accuracy measures."""
 
     def body() -> int:
-        import time as _time
-
-        from mechsys.analysis.simulate import simulate as run_simulation
         from mechsys.report.simulation import check_result_path, plot_histories, summary_table, write_result
 
         if output is not None:
@@ -392,26 +389,15 @@ def simulate(
             from mechsys.report.animation import check_animation_path, write_animation
 
             check_animation_path(animate, fps)
-        t0 = _time.perf_counter()
-        from mechsys.analysis import warm
+        from mechsys.analysis.warm import simulate_file
         from mechsys.report.progress import ProgressBar
 
         bar = ProgressBar(t_end)
-        # a repeated run of the same file and options starts warm (no sympy, no scipy), unless an option needs
-        # the symbolic model
-        result = None if (animate or reactions) else warm.run_planned(file, set_ or [], t_end, dt, method, rtol,
-                                                                       atol, bar, max_steps)
-        if result is None:
-            import mechsys
-            from mechsys.model.load import parse_assignments
-
-            # prescribed coordinates are released into drive constraints so their driving forces are outputs
-            model = mechsys.load(file, parse_assignments(set_), release_prescribed=True)
-            result = run_simulation(model, t_end, dt, method, rtol, atol, capture_velocity=capture, progress=bar,
-                                    max_steps=max_steps)
-            warm.remember(file, set_ or [], model, result)
-        bar.close()
-        result.timings = {"load": _time.perf_counter() - t0 - sum(result.timings.values()), **result.timings}
+        try:
+            result, model = simulate_file(file, set_ or [], t_end, dt, method, rtol, atol, capture, max_steps,
+                                          progress=bar, need_model=bool(animate or reactions))
+        finally:
+            bar.close()
         names, data = result.columns()
         if animate is not None:  # first: a non-planar model fails before any other file is written
             write_animation(model, result, animate, fps, source=file)
@@ -619,7 +605,7 @@ def sweep(
         help="Swept input: a parameter, a coordinate's initial value or der(NAME) its initial rate; N points from "
              "START to STOP. Repeatable (Cartesian grid). With --sample: NAME=LO:HI is the box."),
     run_: str = typer.Option(..., "--run", "-r", help="Analysis of each task: equilibria, simulate, modes, info, "
-                                                       "bifurcations or derive (mechsys/analysis/tasks.py)."),
+                                                       "bifurcations, collide or derive (mechsys/analysis/tasks.py)."),
     sample: Optional[str] = typer.Option(None, "--sample", metavar="latin:N|random:N",
                                          help="N points drawn inside the --param boxes instead of the grid."),
     seed: int = typer.Option(0, "--seed", help="Seed of --sample."),
@@ -654,8 +640,6 @@ def sweep(
 
         analysis = run_.strip()
         if analysis not in ANALYSES:
-            if analysis == "collide":
-                raise InputError("--run collide: not available yet (collide issue)")
             close = difflib.get_close_matches(analysis, list(ANALYSES), n=1)
             hint = f" (did you mean {close[0]!r}?)" if close else ""
             raise InputError(f"--run {analysis!r}: unknown analysis{hint} (choose from {', '.join(ANALYSES)})")
