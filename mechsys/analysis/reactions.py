@@ -18,7 +18,6 @@ q, q' and the q'', multipliers of ``RightHandSide.accelerations`` at each output
 """
 from __future__ import annotations
 
-import hashlib
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -174,11 +173,6 @@ def reaction_source(model: MechanicalModel) -> dict:
             "m": len(lam), "expr": matrix_source(sp.Matrix(exprs), model.t, model.q, inputs, model.parameter_symbols)}
 
 
-def _fingerprint() -> str:
-    """This module's own code is part of the cache key (numeric/cache.py fingerprints only the derivation code)."""
-    return hashlib.sha256(Path(__file__).read_bytes()).hexdigest()[:12]
-
-
 def compiled_reactions(model: MechanicalModel) -> dict:
     """The compiled reaction function and its layout, derived once per model structure (cached on disk)."""
     cached = model.__dict__.get("_reactions_compiled")
@@ -187,7 +181,7 @@ def compiled_reactions(model: MechanicalModel) -> dict:
     from mechsys.numeric import cache
     from mechsys.numeric.lambdify import matrix_from_source
 
-    key = cache.model_key(model, f"reactions-{_fingerprint()}")
+    key = cache.model_key(model, "reactions")
     desc = cache.load(key)
     if desc is None or not {"links", "joints", "m", "expr"} <= set(desc):
         desc = reaction_source(model)

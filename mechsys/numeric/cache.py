@@ -48,7 +48,8 @@ def code_fingerprint() -> str:
         digest = hashlib.sha256()
         files = [f for sub in ("model", "mechanics", "numeric") for f in sorted((root / sub).glob("*.py"))]
         files += sorted((root / "numeric").glob("*.c"))  # the native integrator template
-        files.append(root / "analysis" / "simulate.py")  # it defines what a cache entry holds
+        # the analyses that generate code of their own define what their entries hold
+        files += [root / "analysis" / name for name in ("simulate.py", "reactions.py")]
         for f in files:
             digest.update(f.read_bytes())
         _FINGERPRINT = digest.hexdigest()[:16]
