@@ -166,8 +166,9 @@ class RightHandSide:
             try:
                 return np.linalg.solve(M, f), np.zeros(0)
             except np.linalg.LinAlgError:
-                raise AnalysisError(f"the mass matrix is singular at t = {t:.6g} (a coordinate without mass or "
-                                    "inertia: make it prescribed or give it mass)") from None
+                raise AnalysisError(f"the mass matrix is singular at t = {t:.6g}: a coordinate, or a combination "
+                                    "of them such as a rod's spin about its own axis, carries no mass or inertia "
+                                    "(make it prescribed, or give it mass or inertia)") from None
         A = self.c.A(t, q, u, self.p)
         b = self.c.b(t, q, u, self.p).ravel()
         if self.persistent:
