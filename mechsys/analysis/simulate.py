@@ -317,7 +317,7 @@ def native_integrator(model: MechanicalModel, c: Compiled, required: bool):
     return c.native
 
 
-def _native_projected(nat, c: Compiled, p: np.ndarray, grid: np.ndarray, y0: np.ndarray, rtol: float, atol: float,
+def native_projected(nat, c: Compiled, p: np.ndarray, grid: np.ndarray, y0: np.ndarray, rtol: float, atol: float,
                       progress, max_steps: float) -> tuple:
     """Closed loops on the compiled loop: one native solve per output interval (as the scipy path restarts
     solve_ivp), projection onto the constraints in between. Returns (Y, RHS calls, steps), or (None, calls, t) when
@@ -339,6 +339,23 @@ def _native_projected(nat, c: Compiled, p: np.ndarray, grid: np.ndarray, y0: np.
         if progress is not None and k % 50 == 49:
             progress(float(b))
     return np.array(ys), calls, steps
+
+
+def output_grid(t_end: float, dt: float | None) -> np.ndarray:
+    """Output times 0, dt, 2 dt, ..., t_end (default dt = t_end/1000)."""
+    dt = dt or t_end / 1000
+    grid = np.arange(0.0, t_end + 0.5 * dt, dt)
+    grid[-1] = min(grid[-1], t_end)
+    return grid
+
+
+def constraint_residual(c: Compiled, p: np.ndarray, grid: np.ndarray, q: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """At each output: the larger of max |Phi| (positions) and max |A q' + a_t| (velocities: the only residual of
+    rolling constraints); zeros without constraints."""
+    if not c.m:
+        return np.zeros(len(grid))
+    return np.array([max(np.max(np.abs(c.phi(t, qi, ui, p)), initial=0.0), np.max(np.abs(c.cv(t, qi, ui, p))))
+                     for t, qi, ui in zip(grid, q, u)])
 
 
 def _start(model: MechanicalModel, c: Compiled, p: np.ndarray) -> tuple[np.ndarray, np.ndarray, list[str]]:
@@ -443,9 +460,7 @@ def simulate(model: MechanicalModel, t_end: float, dt: float | None = None, meth
             rtol, atol = rtol / CVODE_TIGHTENING, atol / CVODE_TIGHTENING
     elif method == "CVODE":
         cvode_usable(c, True)
-    dt = dt or t_end / 1000
-    grid = np.arange(0.0, t_end + 0.5 * dt, dt)
-    grid[-1] = min(grid[-1], t_end)
+    grid = output_grid(t_end, dt)
     t1 = time.perf_counter()
     n = c.n
     event_fns = _event_functions(model, c, p)
@@ -466,7 +481,7 @@ def simulate(model: MechanicalModel, t_end: float, dt: float | None = None, meth
 
     Y = None
     if chosen == "native" and c.m:
-        Y, calls, steps = _native_projected(nat, c, p, grid, y0, rtol, atol, progress, max_steps)
+        Y, calls, steps = native_projected(nat, c, p, grid, y0, rtol, atol, progress, max_steps)
         rhs.calls += calls
         if Y is None:  # a singular [[M, A^T], [A, 0]]: redundant constraints need the least-squares solve
             if method == "native":
@@ -496,11 +511,7 @@ def simulate(model: MechanicalModel, t_end: float, dt: float | None = None, meth
     q, u = Y[:, :n], Y[:, n:]
     T = np.array([c.T(t, qi, ui, p)[0, 0] for t, qi, ui in zip(grid, q, u)])
     V = np.array([c.V(t, qi, ui, p)[0, 0] for t, qi, ui in zip(grid, q, u)])
-    if c.m:  # positions |Phi| and velocities |A q' + a_t| (the only residual of rolling constraints)
-        res = np.array([max(np.max(np.abs(c.phi(t, qi, ui, p)), initial=0.0), np.max(np.abs(c.cv(t, qi, ui, p))))
-                        for t, qi, ui in zip(grid, q, u)])
-    else:
-        res = np.zeros(len(grid))
+    res = constraint_residual(c, p, grid, q, u)
     driving = {}
     rows = [k for k, con in enumerate(model.kin.constraints) if con.name.startswith("drive(")]
     if rows:

@@ -2,8 +2,9 @@
 skips sympy, pydantic and scipy and goes straight to the cached native integrator.
 
 The plan holds only what the native path reads: coordinate names, parameter and initial values, the fastest
-decay rate (auto's stiffness decision is redone for the new t_end), the generated source of T and V, and the
-path of the compiled library. Any change to the file, the options, mechsys or its code gives a new key; a
+decay rate (auto's stiffness decision is redone for the new t_end), the generated source of T and V (and of the
+constraint rows that projection reads), and the path of the compiled library. Scenes with events, contacts or
+drives (whose forces need the Python equations) always take the full path. Any change to the file, the options, mechsys or its code gives a new key; a
 missing library or a damaged plan falls back to the full (cold) path, which writes the plan again."""
 from __future__ import annotations
 
@@ -50,42 +51,51 @@ def run_planned(path: Path, overrides: Sequence[str], t_end: float, dt: Optional
         return None
     if method == "auto" and plan["decay_rate"] * t_end > STIFF_STEPS:
         return None  # stiff over this horizon: the full path chooses an implicit method
+    from mechsys.analysis.simulate import Compiled, constraint_residual, native_projected, output_grid
     from mechsys.numeric.native import NativeIntegrator
     from mechsys.numeric.runtime import matrix_from_source
 
     t0 = time.perf_counter()
     try:
         nat = NativeIntegrator(Path(plan["library"]))
-        T_fn, V_fn = matrix_from_source(plan["T"]), matrix_from_source(plan["V"])
+        n, m = len(plan["coordinates"]), plan["m"]
+        # what projection and the energy columns read (the equations themselves are in the library)
+        c = Compiled(None, matrix_from_source(plan["A"]), None, matrix_from_source(plan["phi"]),
+                     matrix_from_source(plan["T"]), matrix_from_source(plan["V"]), matrix_from_source(plan["cv"]),
+                     n, m, 0.0)
     except (OSError, KeyError, SyntaxError):
         return None
     p = np.array(plan["parameters"], dtype=float)
     y0 = np.array(plan["initial"], dtype=float)
-    n = len(plan["coordinates"])
     load_seconds = time.perf_counter() - t0
-    dt = dt or t_end / 1000
-    grid = np.arange(0.0, t_end + 0.5 * dt, dt)
-    grid[-1] = min(grid[-1], t_end)
+    grid = output_grid(t_end, dt)
     t1 = time.perf_counter()
-    run = nat.run(p, y0, grid, rtol, atol, progress, max_steps=max_steps)
-    if run.status:
-        return None  # let the full path report the failure with its context
+    if m:
+        Y, nfev, steps = native_projected(nat, c, p, grid, y0, rtol, atol, progress, max_steps)
+        if Y is None:
+            return None  # redundant constraints: the full path falls back to least squares and says so
+    else:
+        run = nat.run(p, y0, grid, rtol, atol, progress, max_steps=max_steps)
+        if run.status:
+            return None  # let the full path report the failure with its context
+        Y, nfev, steps = run.y, run.nfev, run.nsteps
     seconds = time.perf_counter() - t1
-    q, u = run.y[:, :n], run.y[:, n:]
-    T = np.array([T_fn(t, qi, ui, p)[0, 0] for t, qi, ui in zip(grid, q, u)])
-    V = np.array([V_fn(t, qi, ui, p)[0, 0] for t, qi, ui in zip(grid, q, u)])
+    q, u = Y[:, :n], Y[:, n:]
+    T = np.array([c.T(t, qi, ui, p)[0, 0] for t, qi, ui in zip(grid, q, u)])
+    V = np.array([c.V(t, qi, ui, p)[0, 0] for t, qi, ui in zip(grid, q, u)])
     warnings = list(plan["warnings"])
     if method == "auto":
         warnings.append(f"auto method: native (non-stiff: fastest decay rate {plan['decay_rate']:.3g} 1/s)")
     timings = {"load compiled code (warm plan)": load_seconds, "integrate": seconds}
-    return SimulationResult(list(plan["coordinates"]), grid, q, u, T, V, np.zeros(len(grid)), "native",
-                            run.nfev + (2 * n + 1 if method == "auto" else 0), run.nsteps, timings, warnings)
+    return SimulationResult(list(plan["coordinates"]), grid, q, u, T, V, constraint_residual(c, p, grid, q, u),
+                            "native", nfev + (2 * n + 1 if method == "auto" else 0), steps, timings, warnings)
 
 
 def remember(path: Path, overrides: Sequence[str], model, result: SimulationResult) -> None:
     """Store the plan of a native run so the next identical run starts warm (no-op for other methods)."""
     key = plan_key(path, overrides)
-    if key is None or result.method != "native" or model.kin.constraints or model.events or model.kin.contacts:
+    drives = any(con.name.startswith("drive(") for con in model.kin.constraints)  # need the multipliers
+    if key is None or result.method != "native" or drives or model.events or model.kin.contacts:
         return
     from mechsys.analysis.equilibria import parameter_values
     from mechsys.analysis.simulate import RightHandSide, compile_model, stiffness
@@ -99,7 +109,8 @@ def remember(path: Path, overrides: Sequence[str], model, result: SimulationResu
     radius, _ = stiffness(RightHandSide(compile_model(model), p), 0.0, y0, 1.0)
     cache.store(key, {"coordinates": list(model.coordinates), "parameters": [float(x) for x in p],
                       "initial": [float(x) for x in y0], "decay_rate": radius, "library": str(nat.path),
-                      "T": entry["T"], "V": entry["V"],
+                      "T": entry["T"], "V": entry["V"], "phi": entry["phi"], "A": entry["A"], "cv": entry["cv"],
+                      "m": entry["m"],
                       "warnings": [w for w in result.warnings if not w.startswith("auto method")]})
 
 
