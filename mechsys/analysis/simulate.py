@@ -9,14 +9,14 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from mechsys.errors import AnalysisError
+from mechsys.numeric.native import BUDGET_SPENT
 
 if TYPE_CHECKING:  # sympy and the model are imported only where used: a warm run (analysis/warm.py) needs neither
     from mechsys.mechanics.model import MechanicalModel
 
 METHODS = ("auto", "native", "CVODE", "RK45", "DOP853", "Radau", "BDF", "LSODA")
 EVALUATIONS_PER_STEP = 20  # the scipy and CVODE paths count the step budget in right-hand-side evaluations
-BUDGET_SPENT = ("the step budget (--max-steps) is spent: a stiff scene (try --method Radau or CVODE) or a discontinuous "
-                "law such as sign() of a rate that the integrator chatters on")
+
 # auto runs CVODE at rtol/100: at equal rtol its error is 30-100x Radau's (benchmarks/stiff.py)
 CVODE_TIGHTENING = 100.0
 

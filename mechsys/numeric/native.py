@@ -23,12 +23,13 @@ import numpy as np
 from mechsys.errors import AnalysisError
 
 TEMPLATE = Path(__file__).with_name("dop853.c")
+BUDGET_SPENT = ("the step budget (--max-steps) is spent: a stiff scene (try --method Radau or CVODE) or a discontinuous "
+                "law such as sign() of a rate that the integrator chatters on")
 _STATUS = {-1: "the step size became too small",
            -2: "the mass matrix (or, with constraints, [[M, A^T], [A, 0]]: redundant constraints or a singular "
                "configuration) is singular",
            -3: "the state or its derivative is not finite", -4: "an output time lies past the end",
-           -5: "the step budget (--max-steps) is spent: a stiff scene (try --method Radau or CVODE) or a "
-               "discontinuous law such as sign() of a rate that the integrator chatters on"}  # = simulate.BUDGET_SPENT
+           -5: BUDGET_SPENT}
 
 
 def compiler() -> Optional[str]:
@@ -43,7 +44,6 @@ def compiler() -> Optional[str]:
 
 
 def _c_printer(names: dict):
-    import sympy as sp
     from sympy.printing.c import C99CodePrinter
 
     class Printer(C99CodePrinter):
@@ -66,7 +66,6 @@ def _c_printer(names: dict):
                 return f"(1.0/({prod}))" if expr.exp < 0 else f"({prod})"
             return super()._print_Pow(expr)
 
-    del sp
     return Printer()
 
 
