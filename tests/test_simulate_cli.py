@@ -47,8 +47,9 @@ def test_bad_inputs_exit_2(tmp_path):
     assert invoke("plot", bad, "-o", tmp_path / "x.png").exit_code == 2
 
 
-def test_unknown_method_is_an_analysis_error():
-    assert invoke("simulate", ROOT / "systems" / "motor_arm.yaml", "--method", "Euler").exit_code == 1
+def test_unknown_method_is_an_input_error():
+    """An option value the command does not know is invalid input (exit 2), like any other bad option."""
+    assert invoke("simulate", ROOT / "systems" / "motor_arm.yaml", "--method", "Euler").exit_code == 2
 
 
 def test_bench_table_has_every_method_and_tolerance():

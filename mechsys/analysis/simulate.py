@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from mechsys.errors import AnalysisError
+from mechsys.errors import AnalysisError, InputError
 from mechsys.numeric.native import BUDGET_SPENT
 
 if TYPE_CHECKING:  # sympy and the model are imported only where used: a warm run (analysis/warm.py) needs neither
@@ -433,9 +433,9 @@ def simulate(model: MechanicalModel, t_end: float, dt: float | None = None, meth
     work (the native loop's steps, or EVALUATIONS_PER_STEP times as many right-hand-side evaluations elsewhere), so
     a chattering discontinuous law fails with a reason instead of running for hours."""
     if method not in METHODS:
-        raise AnalysisError(f"unknown method {method!r}; use one of {', '.join(METHODS)}")
+        raise InputError(f"--method: unknown method {method!r}; use one of {', '.join(METHODS)}")
     if t_end <= 0:
-        raise AnalysisError("--t-end must be positive")
+        raise InputError("--t-end must be positive")
     from mechsys.analysis.equilibria import parameter_values
 
     timings = {}
