@@ -39,7 +39,7 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/derive_chain.py
 	$(BIN)/python benchmarks/simulate_anchor.py
 	$(BIN)/mechsys bench systems/double_pendulum.yaml --t-end 5
-	$(BIN)/mechsys bench systems/four_bar.yaml --t-end 5 --methods DOP853,Radau,LSODA
+	$(BIN)/mechsys bench systems/four_bar.yaml --t-end 2 --methods native,DOP853,Radau
 	$(BIN)/mechsys bench systems/centrifuge.yaml --t-end 20
 
 clean:
