@@ -36,7 +36,9 @@ check: $(STAMP)
 
 ## bench: speed benchmarks, reported as ratios against the named baselines
 bench: $(STAMP)
+	$(BIN)/python -m pip install --quiet -e ".[dev,bench]"
 	$(BIN)/python benchmarks/derive_chain.py
+	$(BIN)/python benchmarks/backends.py
 	$(BIN)/python benchmarks/simulate_anchor.py
 	$(BIN)/mechsys bench systems/double_pendulum.yaml --t-end 5
 	$(BIN)/mechsys bench systems/four_bar.yaml --t-end 2 --methods native,DOP853,Radau
