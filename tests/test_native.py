@@ -58,7 +58,8 @@ def test_native_takes_scipys_dop853_steps(name, t_end):
     assert run.status == 0 and len(run.y) == len(grid)
     scale = 1 + np.max(np.abs(sol.y))
     assert np.max(np.abs(run.y - sol.y.T)) < 1e-10 * scale
-    assert abs(run.nfev - sol.nfev) <= 3  # scipy counts the dense-output stages the same way
+    # the same steps; native skips the 3 dense-output stages when a step ends exactly on an output time
+    assert sol.nfev - 3 * len(grid) <= run.nfev <= sol.nfev
 
 
 def test_native_3d_body_conserves_energy_and_matches_reference():

@@ -319,14 +319,15 @@ def native_integrator(model: MechanicalModel, c: Compiled, required: bool):
 
 def native_projected(nat, c: Compiled, p: np.ndarray, grid: np.ndarray, y0: np.ndarray, rtol: float, atol: float,
                       progress, max_steps: float) -> tuple:
-    """Closed loops on the compiled loop: one native solve per output interval (as the scipy path restarts
-    solve_ivp), projection onto the constraints in between. Returns (Y, RHS calls, steps), or (None, calls, t) when
+    """Closed loops on the compiled loop: one native solve per output interval, projection onto the constraints in
+    between; each interval starts with the step size the previous one reached. Returns (Y, RHS calls, steps), or (None, calls, t) when
     the augmented matrix is singular at t."""
     n = c.n
     ys, calls, steps = [y0], 0, 0
-    y = y0
+    y, h = y0, 0.0
     for k, (a, b) in enumerate(zip(grid[:-1], grid[1:])):
-        run = nat.run(p, y, np.array([a, b]), rtol, atol, max_steps=max_steps - steps)
+        run = nat.run(p, y, np.array([a, b]), rtol, atol, max_steps=max_steps - steps, h0=h)
+        h = run.h_next  # the next interval continues with the step size reached (no new initial-step search)
         calls += run.nfev
         steps += run.nsteps
         if run.status == -2:

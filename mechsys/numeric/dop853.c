@@ -157,8 +157,10 @@ static int initial_step(state_t *s, const double *p, double *h_out) {
     return OK;
 }
 
+/* h0 > 0 continues with a known step size (closed loops restart at every output point after projection);
+ * otherwise the initial step is selected as scipy does. */
 int mechsys_start(state_t *s, double t0, double t_bound, const double *y0, const double *p, double rtol,
-                  double atol, double max_steps) {
+                  double atol, double max_steps, double h0) {
     memset(s, 0, sizeof *s);
     s->max_steps = max_steps;
     s->t = s->t_old = t0;
@@ -168,6 +170,10 @@ int mechsys_start(state_t *s, double t0, double t_bound, const double *y0, const
     memcpy(s->y, y0, sizeof s->y);
     int status = rhs(s, t0, s->y, p, s->f);
     if (status != OK) return status;
+    if (h0 > 0.0) {
+        s->h_abs = h0;
+        return OK;
+    }
     return initial_step(s, p, &s->h_abs);
 }
 
@@ -293,6 +299,11 @@ int mechsys_advance(state_t *s, const double *p, int n_out, const double *t_out,
             *done = ++k;
             continue;
         }
+        if (s->has_step && tk == s->t) {  /* the step ends on the output time: no interpolation needed */
+            memcpy(y_out + (long)k * NY, s->y, sizeof s->y);
+            *done = ++k;
+            continue;
+        }
         if (s->has_step && tk >= s->t_old && tk <= s->t) {
             if (!s->dense_ready) {
                 int status = dense(s, p);
@@ -314,4 +325,5 @@ void mechsys_counters(const state_t *s, double *out) {
     out[1] = (double)s->nsteps;
     out[2] = (double)s->nrejected;
     out[3] = s->t;
+    out[4] = s->h_abs;
 }

@@ -161,6 +161,7 @@ class NativeRun:
     nrejected: int
     status: int
     t_reached: float
+    h_next: float = 0.0  # the step size the loop would take next (to continue after a projection)
 
     @property
     def message(self) -> str:
@@ -178,7 +179,7 @@ class NativeIntegrator:
         lib.mechsys_state_bytes.restype = ctypes.c_int
         lib.mechsys_size.restype = ctypes.c_int
         lib.mechsys_start.argtypes = [ctypes.c_void_p, ctypes.c_double, ctypes.c_double, dp, dp, ctypes.c_double,
-                                      ctypes.c_double, ctypes.c_double]
+                                      ctypes.c_double, ctypes.c_double, ctypes.c_double]
         lib.mechsys_advance.argtypes = [ctypes.c_void_p, dp, ctypes.c_int, dp, dp, ctypes.POINTER(ctypes.c_int)]
         lib.mechsys_counters.argtypes = [ctypes.c_void_p, dp]
         lib.mechsys_accelerations.argtypes = [ctypes.c_double, dp, dp, dp]
@@ -201,17 +202,17 @@ class NativeIntegrator:
 
     def run(self, p: np.ndarray, y0: np.ndarray, t_out: np.ndarray, rtol: float, atol: float,
             progress: Optional[Callable[[float], None]] = None, chunk: int = 50,
-            max_steps: float = 1e6) -> NativeRun:
+            max_steps: float = 1e6, h0: float = 0.0) -> NativeRun:
         """Integrate from t_out[0] to t_out[-1]; outputs at every t_out. ``progress(t)`` is called every ``chunk``
         outputs (the loop itself never returns to Python between steps). At most ``max_steps`` steps (accepted
-        and rejected) are taken."""
+        and rejected) are taken. ``h0`` > 0 starts with that step size instead of selecting one."""
         p = np.ascontiguousarray(p, dtype=float)
         y0 = np.ascontiguousarray(y0, dtype=float)
         t_out = np.ascontiguousarray(t_out, dtype=float)
         state = ctypes.create_string_buffer(self._state_bytes)
         Y = np.zeros((len(t_out), 2 * self.n))
         status = self._lib.mechsys_start(state, float(t_out[0]), float(t_out[-1]), self._ptr(y0), self._ptr(p),
-                                         float(rtol), float(atol), float(max_steps))
+                                         float(rtol), float(atol), float(max_steps), float(h0))
         written = 0
         done = ctypes.c_int(0)
         while status == 0 and written < len(t_out):
@@ -221,10 +222,10 @@ class NativeIntegrator:
             written += done.value
             if progress is not None:
                 progress(float(t_out[written - 1]) if written else float(t_out[0]))
-        counters = np.zeros(4)
+        counters = np.zeros(5)
         self._lib.mechsys_counters(state, self._ptr(counters))
         return NativeRun(Y[:written], int(counters[0]), int(counters[1]), int(counters[2]), int(status),
-                         float(counters[3]))
+                         float(counters[3]), float(counters[4]))
 
 
 def load(model) -> Optional[NativeIntegrator]:
