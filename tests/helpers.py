@@ -142,3 +142,18 @@ def assert_rows_match(model, method: str, book_rows: Iterable, rng: np.random.Ge
 def simplifies_to_zero(expr) -> bool:
     """Symbolic check for small expressions."""
     return sp.simplify(sp.expand(sp.sympify(expr))) == 0
+
+
+def double_pendulum_accelerations(q, u, m1: float = 1.0, m2: float = 0.8, l1: float = 0.6, l2: float = 0.5,
+                                  g: float = 9.81) -> np.ndarray:
+    """q'' from the equations written in the header of systems/double_pendulum.yaml (uniform rods, th1 absolute,
+    th2 relative), derived by hand: an independent check of the derived and compiled equations."""
+    th1, th2 = q
+    w1, w2 = u
+    c2, s2 = math.cos(th2), math.sin(th2)
+    M = np.array([[m1 * l1**2 / 3 + m2 * (l1**2 + l2**2 / 3 + l1 * l2 * c2), m2 * (l2**2 / 3 + l1 * l2 * c2 / 2)],
+                  [m2 * (l2**2 / 3 + l1 * l2 * c2 / 2), m2 * l2**2 / 3]])
+    f = np.array([m2 * l1 * l2 * s2 * (w1 * w2 + w2**2 / 2) - (m1 / 2 + m2) * g * l1 * math.sin(th1)
+                  - m2 * g * l2 / 2 * math.sin(th1 + th2),
+                  -m2 * l1 * l2 * s2 * w1**2 / 2 - m2 * g * l2 / 2 * math.sin(th1 + th2)])
+    return np.linalg.solve(M, f)

@@ -12,6 +12,7 @@ from mechsys.analysis.equilibria import parameter_values
 from mechsys.analysis.reactions import COMPONENTS, column_names, reaction_columns, reaction_notes
 from mechsys.analysis.simulate import simulate
 from mechsys.cli import app
+from tests.helpers import double_pendulum_accelerations
 
 ROOT = Path(__file__).resolve().parents[1]
 G = 9.81
@@ -118,13 +119,7 @@ def double_pendulum_newton_euler(q, u, m1=1.0, m2=0.8, l1=0.6, l2=0.5, g=G):
     rod 1 at O: F1 = m1 (a_G1 - g) + F2, M1 = G1 x m1 (a_G1 - g) + I1 phi1'' + G2 x m2 (a_G2 - g) + I2 phi2''."""
     th1, th2 = q
     w1, w2 = u
-    c2, s2 = np.cos(th2), np.sin(th2)
-    M = np.array([[m1 * l1**2 / 3 + m2 * (l1**2 + l2**2 / 3 + l1 * l2 * c2), m2 * (l2**2 / 3 + l1 * l2 * c2 / 2)],
-                  [m2 * (l2**2 / 3 + l1 * l2 * c2 / 2), m2 * l2**2 / 3]])
-    rhs = np.array([m2 * l1 * l2 * s2 * (w1 * w2 + w2**2 / 2) - (m1 / 2 + m2) * g * l1 * np.sin(th1)
-                    - m2 * g * l2 / 2 * np.sin(th1 + th2),
-                    -m2 * l1 * l2 * s2 * w1**2 / 2 - m2 * g * l2 / 2 * np.sin(th1 + th2)])
-    a1, a2 = np.linalg.solve(M, rhs)
+    a1, a2 = double_pendulum_accelerations(q, u, m1, m2, l1, l2, g)
     phi = [th1, th1 + th2]
     dphi = [w1, w1 + w2]
     ddphi = [a1, a1 + a2]

@@ -18,7 +18,7 @@ import math
 
 import numpy as np
 import pytest
-from helpers import load_data, load_system
+from helpers import double_pendulum_accelerations, load_data, load_system
 from scipy.integrate import solve_ivp
 
 from mechsys.analysis.simulate import simulate
@@ -314,14 +314,7 @@ def test_double_pendulum_matches_file_header_eom_2s():
     m1, m2, l1, l2, g = 1.0, 0.8, 0.6, 0.5, 9.81
 
     def rhs(t, y):
-        t1, t2, d1, d2 = y
-        c2, s2 = math.cos(t2), math.sin(t2)
-        M = np.array([[m1 * l1**2 / 3 + m2 * (l1**2 + l2**2 / 3 + l1 * l2 * c2), m2 * (l2**2 / 3 + l1 * l2 * c2 / 2)],
-                      [m2 * (l2**2 / 3 + l1 * l2 * c2 / 2), m2 * l2**2 / 3]])
-        f = np.array([m2 * l1 * l2 * s2 * (d1 * d2 + d2**2 / 2) - (m1 / 2 + m2) * g * l1 * math.sin(t1)
-                      - m2 * g * l2 / 2 * math.sin(t1 + t2),
-                      -m2 * l1 * l2 * s2 * d1**2 / 2 - m2 * g * l2 / 2 * math.sin(t1 + t2)])
-        return [d1, d2, *np.linalg.solve(M, f)]
+        return [y[2], y[3], *double_pendulum_accelerations(y[:2], y[2:], m1, m2, l1, l2, g)]
 
     r = simulate(load_system("double_pendulum"), 2.0)
     want = book_trajectory(rhs, [0.5, 0.3, 0.0, 0.0], r.t)
