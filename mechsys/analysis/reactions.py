@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import sympy as sp
 
-from mechsys.mechanics.build import Builder, _complement
+from mechsys.mechanics.build import Builder
 from mechsys.mechanics.model import MechanicalModel
 
 if TYPE_CHECKING:
@@ -133,8 +133,8 @@ def _constraints(items: _Items, lam: list[sp.Symbol]) -> None:
             lo, ro = items.point(c.through, path + ("through",))
             fr = items.builder.frame(c.frame, path + ("frame",))
             if c.type == "point_on_line":
-                normals = _complement(items.builder.axis(c.direction, path + ("direction",)),
-                                      model.doc.numeric_parameters())
+                normals = items.builder.complement(items.builder.axis(c.direction, path + ("direction",)),
+                                                   f"{name}.direction")
             else:
                 normals = [items.builder.axis(c.normal, path + ("normal",))]
             for k, n in enumerate(normals):

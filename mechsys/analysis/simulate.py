@@ -62,6 +62,28 @@ def _contact_sources(model: MechanicalModel, args) -> dict:
             "gap_names": [c["name"] for c in gap_contacts]}
 
 
+def _compiled_from(desc: dict) -> Compiled | None:
+    """The callables of a (cached) description; None when it is in another format or inconsistent."""
+    from mechsys.numeric.kane import equations_from_source
+    from mechsys.numeric.runtime import matrix_from_source
+
+    try:
+        out = Compiled(equations_from_source(desc["eqs"]), *(matrix_from_source(desc[k]) for k in
+                                                                 ("A", "b", "phi", "T", "V", "cv")),
+                       int(desc["n"]), int(desc["m"]), 0.0, cache_hit=True)
+        out.events = matrix_from_source(desc["events"])
+        out.gaps = matrix_from_source(desc["gaps"])
+        out.gap_A = matrix_from_source(desc["gap_A"])
+        out.gap_b = matrix_from_source(desc["gap_b"])
+        out.gap_names = [str(x) for x in desc["gap_names"]]
+    except (KeyError, TypeError, ValueError, SyntaxError):
+        return None
+    n, m = out.n, out.m
+    if out.eqs.n != n or out.A.shape != (m, n) or out.b.shape != (m, 1) or out.cv.shape != (m, 1):
+        return None
+    return out
+
+
 def compile_model(model: MechanicalModel) -> Compiled:
     """Everything a simulation evaluates, compiled once per model and cached on disk (see numeric/cache.py):
     a second run of the same model structure skips derivation and compilation."""
@@ -71,17 +93,14 @@ def compile_model(model: MechanicalModel) -> Compiled:
     import sympy as sp
 
     from mechsys.numeric import cache
-    from mechsys.numeric.kane import equations_from_source, equations_source
-    from mechsys.numeric.lambdify import matrix_from_source, matrix_source
+    from mechsys.numeric.kane import equations_source
+    from mechsys.numeric.lambdify import matrix_source
 
     t0 = time.perf_counter()
     key = cache.model_key(model, "simulate")
     desc = cache.load(key)
-    required = {"eqs", "A", "b", "phi", "T", "V", "cv", "n", "m", "events", "gaps", "gap_A", "gap_b", "gap_names"}
-    if desc is not None and not required <= set(desc):
-        desc = None  # an entry in an older format
-    hit = desc is not None
-    if not hit:
+    out = _compiled_from(desc) if desc is not None else None
+    if out is None:
         args = (model.t, model.q, model.u, model.parameter_symbols)
         hol = model.holonomic_constraints if model.holonomic_constraints.shape[0] else sp.zeros(0, 1)
         desc = {
@@ -98,15 +117,9 @@ def compile_model(model: MechanicalModel) -> Compiled:
             **_contact_sources(model, args),
         }
         cache.store(key, desc)
-    out = Compiled(equations_from_source(desc["eqs"]), *(matrix_from_source(desc[k]) for k in
-                                                             ("A", "b", "phi", "T", "V", "cv")),
-                   desc["n"], desc["m"], time.perf_counter() - t0)
-    out.cache_hit = hit
-    out.events = matrix_from_source(desc["events"])
-    out.gaps = matrix_from_source(desc["gaps"])
-    out.gap_A = matrix_from_source(desc["gap_A"])
-    out.gap_b = matrix_from_source(desc["gap_b"])
-    out.gap_names = desc["gap_names"]
+        out = _compiled_from(desc)
+        out.cache_hit = False
+    out.seconds = time.perf_counter() - t0
     model._simulation_compiled = out
     return out
 

@@ -265,6 +265,8 @@ class _Base:
         code, never numbers: those live in the copy's document), so the next copy starts with it."""
         from mechsys.mechanics.model import MechanicalModel
 
+        if clone.kin is not self.model.kin:
+            return  # these values changed the structure: the clone was built anew and shares nothing
         base = self.model.__dict__
         for name, value in clone.__dict__.items():
             if name in base or name == "doc":
@@ -296,6 +298,20 @@ class _Base:
         return clone
 
 
+_PRIVATE: list[Path] = []
+
+
+def _private_folder() -> Path:
+    """This process's own folder for model copies (mkdtemp: unpredictable, 0700), removed when it exits."""
+    if not _PRIVATE:
+        import atexit
+        import shutil
+
+        _PRIVATE.append(Path(tempfile.mkdtemp(prefix="mechsys-sweep-")))
+        atexit.register(shutil.rmtree, _PRIVATE[0], True)
+    return _PRIVATE[0]
+
+
 def _model_file(spec: dict) -> str:
     """The model file on this machine: the original path when it holds the same text, else a private copy."""
     path = Path(spec["path"])
@@ -304,8 +320,7 @@ def _model_file(spec: dict) -> str:
             return str(path)
     except OSError:
         pass
-    folder = Path(tempfile.gettempdir()) / f"mechsys-sweep-{os.getuid() if hasattr(os, 'getuid') else 0}"
-    folder.mkdir(parents=True, exist_ok=True)
+    folder = _private_folder()
     copy = folder / f"{spec['digest']}-{path.name}"
     if not copy.exists():
         fd, tmp = tempfile.mkstemp(dir=folder, prefix=".model.")

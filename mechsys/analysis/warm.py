@@ -4,8 +4,10 @@ skips sympy, pydantic and scipy and goes straight to the cached native integrato
 The plan holds only what the native path reads: coordinate names, parameter and initial values, the fastest
 decay rate (auto's stiffness decision is redone for the new t_end), the generated source of T and V (and of the
 constraint rows that projection reads), and the path of the compiled library. Scenes with events, contacts or
-drives (whose forces need the Python equations) always take the full path. Any change to the file, the options, mechsys or its code gives a new key; a
-missing library or a damaged plan falls back to the full (cold) path, which writes the plan again."""
+drives (whose forces need the Python equations) always take the full path. Any change to the file, the options,
+mechsys or its code gives a new key. A plan is used only when it verifies (numeric/cache.py: owner, signature) and
+is consistent with the library it names (sizes of every array, the library's own signature); otherwise, and
+whenever MECHSYS_NATIVE=off, the run takes the full (cold) path, which writes the plan again."""
 from __future__ import annotations
 
 import hashlib
@@ -38,6 +40,36 @@ def plan_key(path: Path, overrides: Sequence[str]) -> Optional[str]:
     return digest.hexdigest()[:32]
 
 
+def _load_plan(plan: dict) -> Optional[tuple]:
+    """(integrator, Compiled, p, y0) from a verified plan, or None when anything in it is inconsistent: the
+    library must verify and agree with every array (the C code reads them by position)."""
+    from mechsys.analysis.simulate import Compiled
+    from mechsys.numeric.native import NativeIntegrator
+    from mechsys.numeric.runtime import matrix_from_source
+
+    try:
+        library = cache.library(str(plan["library_key"]))
+        if library is None:
+            return None
+        nat = NativeIntegrator(library)
+        n, m = nat.n, int(plan["m"])
+        p = np.array(plan["parameters"], dtype=float)
+        y0 = np.array(plan["initial"], dtype=float)
+        names = plan["coordinates"]
+        # what projection and the energy columns read (the equations themselves are in the library)
+        mats = {k: matrix_from_source(plan[k]) for k in ("A", "phi", "T", "V", "cv")}
+        shapes = {"A": (m, n), "T": (1, 1), "V": (1, 1), "cv": (m, 1)}
+        if (len(names) != n or not all(isinstance(x, str) for x in names) or m < 0
+                or p.shape != (nat.n_parameters,) or y0.shape != (2 * n,) or not np.all(np.isfinite(y0))
+                or any(mats[k].shape != shape for k, shape in shapes.items()) or mats["phi"].shape[1] != 1
+                or not np.isfinite(float(plan["decay_rate"])) or not isinstance(plan["warnings"], list)):
+            return None
+    except (OSError, KeyError, TypeError, ValueError, SyntaxError, AttributeError):
+        return None
+    c = Compiled(None, mats["A"], None, mats["phi"], mats["T"], mats["V"], mats["cv"], n, m, 0.0)
+    return nat, c, p, y0
+
+
 def run_planned(path: Path, overrides: Sequence[str], t_end: float, dt: Optional[float], method: str,
                 rtol: float, atol: float, progress: Optional[Callable[[float], None]] = None,
                 max_steps: float = 1e6) -> Optional[SimulationResult]:
@@ -45,28 +77,20 @@ def run_planned(path: Path, overrides: Sequence[str], t_end: float, dt: Optional
     loads the model and runs `simulate`)."""
     if method not in ("auto", "native") or t_end <= 0:
         return None
+    from mechsys.numeric.native import compiler
+
     key = plan_key(path, overrides)
-    plan = cache.load(key) if key else None
-    if not plan or not Path(plan.get("library", "")).exists():
+    plan = cache.load(key) if key and compiler() is not None else None
+    t0 = time.perf_counter()
+    loaded = _load_plan(plan) if plan else None
+    if loaded is None:
         return None
+    nat, c, p, y0 = loaded
     if method == "auto" and plan["decay_rate"] * t_end > STIFF_STEPS:
         return None  # stiff over this horizon: the full path chooses an implicit method
-    from mechsys.analysis.simulate import Compiled, constraint_residual, native_projected, output_grid
-    from mechsys.numeric.native import NativeIntegrator
-    from mechsys.numeric.runtime import matrix_from_source
+    from mechsys.analysis.simulate import constraint_residual, native_projected, output_grid
 
-    t0 = time.perf_counter()
-    try:
-        nat = NativeIntegrator(Path(plan["library"]))
-        n, m = len(plan["coordinates"]), plan["m"]
-        # what projection and the energy columns read (the equations themselves are in the library)
-        c = Compiled(None, matrix_from_source(plan["A"]), None, matrix_from_source(plan["phi"]),
-                     matrix_from_source(plan["T"]), matrix_from_source(plan["V"]), matrix_from_source(plan["cv"]),
-                     n, m, 0.0)
-    except (OSError, KeyError, SyntaxError):
-        return None
-    p = np.array(plan["parameters"], dtype=float)
-    y0 = np.array(plan["initial"], dtype=float)
+    n, m = c.n, c.m
     load_seconds = time.perf_counter() - t0
     grid = output_grid(t_end, dt)
     t1 = time.perf_counter()
@@ -102,13 +126,13 @@ def remember(path: Path, overrides: Sequence[str], model, result: SimulationResu
 
     nat = compile_model(model).native
     entry = cache.load(cache.model_key(model, "simulate"))
-    if nat is None or entry is None:
+    if nat is None or nat.key is None or entry is None:
         return
     p = parameter_values(model)
     y0 = np.concatenate([result.q[0], result.u[0]])
     radius, _ = stiffness(RightHandSide(compile_model(model), p), 0.0, y0, 1.0)
     cache.store(key, {"coordinates": list(model.coordinates), "parameters": [float(x) for x in p],
-                      "initial": [float(x) for x in y0], "decay_rate": radius, "library": str(nat.path),
+                      "initial": [float(x) for x in y0], "decay_rate": radius, "library_key": nat.key,
                       "T": entry["T"], "V": entry["V"], "phi": entry["phi"], "A": entry["A"], "cv": entry["cv"],
                       "m": entry["m"],
                       "warnings": [w for w in result.warnings if not w.startswith("auto method")]})

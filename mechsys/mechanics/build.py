@@ -69,6 +69,9 @@ class Kinematics:
     constraint_elements: list[tuple[str, int]] = field(default_factory=list)  # (type, NCE)
     contacts: list[dict] = field(default_factory=list)
     angles: dict[str, bool] = field(default_factory=dict)
+    # structural choices made with the numeric parameter values (rows found identically zero, a helper axis):
+    # (what, kind, expression, outcome); cache keys include the outcomes and `decisions_hold` re-checks them
+    decisions: list[tuple[str, str, Any, bool]] = field(default_factory=list)
 
 
 class Builder:
@@ -101,6 +104,23 @@ class Builder:
         if nonnegative and val.real < 0:
             raise self.doc.error(path, "must not be negative")
         return val.real
+
+    def vanishes(self, expr: sp.Expr, what: str) -> bool:
+        """Whether ``expr`` is identically zero with the file's parameter values (recorded as a decision)."""
+        outcome = decide("zero", expr, self.doc.numeric_parameters())
+        self.kin.decisions.append((what, "zero", expr, outcome))
+        return outcome
+
+    def complement(self, d: sp.Matrix, what: str) -> list[sp.Matrix]:
+        """Two unit vectors orthogonal to unit vector ``d``; the helper axis chosen is recorded as a decision."""
+        key = tuple(abs(e) if e.is_number else None for e in d)
+        if key in ((1, 0, 0), (0, 1, 0), (0, 0, 1)):
+            k = key.index(1)
+            return [sp.Matrix(AXES["xyz"[(k + 1) % 3]]), sp.Matrix(AXES["xyz"[(k + 2) % 3]])]
+        near_x = decide("near_x", d[0], self.doc.numeric_parameters())
+        self.kin.decisions.append((what, "near_x", d[0], near_x))
+        n1 = unit(d.cross(sp.Matrix([0, 1, 0]) if near_x else sp.Matrix([1, 0, 0])))
+        return [n1, d.cross(n1)]
 
     def frame(self, name: str, path: Path) -> FrameState:
         if name == "ground":
@@ -408,7 +428,7 @@ class Builder:
                 fr = self.frame(c.frame, cp + ("frame",))
                 if c.type == "point_on_line":
                     d = self.axis(c.direction, cp + ("direction",))
-                    normals = _complement(d, self.doc.numeric_parameters())
+                    normals = self.complement(d, f"{name}.direction")
                 else:
                     normals = [self.axis(c.normal, cp + ("normal",))]
                 rows = []
@@ -417,7 +437,7 @@ class Builder:
                     rows.append(ConstraintRow(f"{name}.{k + 1}", "holonomic", phi, self.rate_of(phi)))
             elif c.type == "rolling":
                 rows = self.rolling(c, name, cp)
-            kept = [r for r in rows if not _identically_zero(r.velocity, self.doc)]
+            kept = [r for r in rows if not self.vanishes(r.velocity, r.name)]
             if not kept:
                 raise self.doc.error(cp, "this constraint references no coordinate (it is identically satisfied)")
             self.kin.constraints.extend(kept)
@@ -480,7 +500,7 @@ class Builder:
                     velocities.append(frame.home_R * v_home)
                     entry["points"].append((ref.partition(".")[0], frame.point(local), 1 if k == 0 else -1))
                 vn = n.dot(velocities[0] - velocities[1])
-                if _identically_zero(vn, self.doc):
+                if self.vanishes(vn, f"{c.name}.vn"):
                     raise self.doc.error(cp, "the contact points cannot approach each other along the normal")
                 entry.update(gap=None, vn=vn, normal=n, vrel=velocities[0] - velocities[1])
             else:
@@ -489,7 +509,7 @@ class Builder:
                 where = cp + (kind,)
                 if not (entry["gap"].free_symbols & set(self.doc.coords.values())):
                     raise self.doc.error(where, "the gap does not depend on any free coordinate")
-                if kind != "gap" and _identically_zero(entry["vn"], self.doc):
+                if kind != "gap" and self.vanishes(entry["vn"], f"{c.name}.vn"):
                     raise self.doc.error(where, "the two sides cannot approach each other along the normal")
             self.kin.contacts.append(entry)
 
@@ -612,18 +632,24 @@ class Builder:
             self.kin.loads.append(Load(f.type, data))
 
 
-def _complement(d: sp.Matrix, values: dict) -> list[sp.Matrix]:
-    """Two unit vectors orthogonal to unit vector ``d`` (which may depend on parameters with ``values``)."""
-    key = tuple(abs(e) if e.is_number else None for e in d)
-    if key in ((1, 0, 0), (0, 1, 0), (0, 0, 1)):
-        k = key.index(1)
-        return [sp.Matrix(AXES["xyz"[(k + 1) % 3]]), sp.Matrix(AXES["xyz"[(k + 2) % 3]])]
-    helper = sp.Matrix([1, 0, 0]) if abs(float(d[0].subs(values))) < 0.9 else sp.Matrix([0, 1, 0])
-    n1 = unit(d.cross(helper))
-    return [n1, d.cross(n1)]
+def decide(kind: str, expr: Any, values: dict) -> bool:
+    """A structural decision that depends on parameter values: "zero" (``expr`` vanishes identically) or
+    "near_x" (the direction component ``expr`` is at least 0.9, so x is no helper axis)."""
+    if kind == "near_x":
+        return abs(float(sp.sympify(expr).subs(values))) >= 0.9
+    return _identically_zero(expr, values)
 
 
-def _identically_zero(expr: sp.Expr, doc: Document) -> bool:
+def decisions_hold(kin: Kinematics, values: dict) -> bool:
+    """True when every value-dependent decision of ``kin`` comes out the same with these parameter values
+    (symbol -> number): the same structure, derivations and compiled code serve them."""
+    try:
+        return all(decide(kind, expr, values) == outcome for _what, kind, expr, outcome in kin.decisions)
+    except (TypeError, ValueError, ZeroDivisionError):
+        return False
+
+
+def _identically_zero(expr: sp.Expr, values: dict) -> bool:
     """True when ``expr`` vanishes structurally, or at several random states (then it is identically 0)."""
     expr = sp.sympify(expr)
     if expr == 0:
@@ -632,7 +658,6 @@ def _identically_zero(expr: sp.Expr, doc: Document) -> bool:
 
     rng = random.Random(1234)
     symbols = sorted(expr.free_symbols, key=str)
-    values = dict(doc.numeric_parameters())
     for _ in range(4):
         subs = {s: values.get(s, rng.uniform(-1.3, 1.7)) for s in symbols}
         try:

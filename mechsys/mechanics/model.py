@@ -84,6 +84,10 @@ class MechanicalModel:
             val = float(expr.xreplace(values_now).evalf())
             values_now[doc.parameters[name]] = sp.Float(val)
             doc.parameter_values[name] = val
+        from mechsys.mechanics.build import decisions_hold
+
+        if not decisions_hold(self.kin, doc.numeric_parameters()):
+            return MechanicalModel(doc)  # these values change the structure (a constraint row vanishes or not)
         clone = copy.copy(self)
         clone.doc = doc
         return clone

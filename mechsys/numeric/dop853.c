@@ -28,6 +28,7 @@ typedef struct {
 
 int mechsys_state_bytes(void) { return (int)sizeof(state_t); }
 int mechsys_size(void) { return N; }
+int mechsys_parameters(void) { return NPAR; }
 
 /* Solve A x = b in place (A row-major n x n) by LU with partial pivoting; SINGULAR for a zero pivot. */
 static int solve(double *A, double *b, int n) {

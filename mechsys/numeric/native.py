@@ -123,7 +123,7 @@ def model_source(model) -> str:
     m = len(model.kin.constraints)
     rows = [*model.constraint_jacobian, *model.constraint_rhs] if m else [0]  # A (m x n, row-major), then b
     head = ["#include <math.h>", "#include <string.h>", "#ifndef M_PI", "#define M_PI 3.14159265358979323846",
-            "#endif", f"#define N {n}", f"#define NOUT {max(len(pieces), 1)}", f"#define NB {max(len(layout), 1)}",
+            "#endif", f"#define N {n}", f"#define NPAR {len(model.parameter_symbols)}", f"#define NOUT {max(len(pieces), 1)}", f"#define NB {max(len(layout), 1)}",
             "static const int LAYOUT[2 * NB] = {" + (", ".join(str(int(x)) for b in layout for x in b) or "0, 0")
             + "};",
             _table("A", co.A), _table("B", co.B), _table("C", co.C), _table("E3", co.E3), _table("E5", co.E5),
@@ -139,7 +139,6 @@ def build(source: str, target: Path) -> None:
     cc = compiler()
     if cc is None:
         raise AnalysisError("no C compiler found for the native integrator (set CC or use --method DOP853)")
-    target.parent.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(dir=target.parent) as tmp:
         c_file = Path(tmp) / "model.c"
         c_file.write_text(source, encoding="utf-8")
@@ -178,22 +177,32 @@ class NativeIntegrator:
         dp = ctypes.POINTER(ctypes.c_double)
         lib.mechsys_state_bytes.restype = ctypes.c_int
         lib.mechsys_size.restype = ctypes.c_int
+        lib.mechsys_parameters.restype = ctypes.c_int
         lib.mechsys_start.argtypes = [ctypes.c_void_p, ctypes.c_double, ctypes.c_double, dp, dp, ctypes.c_double,
                                       ctypes.c_double, ctypes.c_double, ctypes.c_double]
         lib.mechsys_advance.argtypes = [ctypes.c_void_p, dp, ctypes.c_int, dp, dp, ctypes.POINTER(ctypes.c_int)]
         lib.mechsys_counters.argtypes = [ctypes.c_void_p, dp]
         lib.mechsys_accelerations.argtypes = [ctypes.c_double, dp, dp, dp]
         self.n = lib.mechsys_size()
+        self.n_parameters = lib.mechsys_parameters()
         self.from_cache = False
+        self.key: Optional[str] = None  # the cache key when the library is kept in the cache
         self._state_bytes = lib.mechsys_state_bytes()
 
     @staticmethod
     def _ptr(a: np.ndarray):
         return a.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
 
+    def check_sizes(self, p: np.ndarray, y: np.ndarray) -> None:
+        """The C code reads p and y by position without bounds: refuse arrays of another length."""
+        if p.shape != (self.n_parameters,) or y.shape != (2 * self.n,):
+            raise AnalysisError(f"native integrator: {len(p)} parameters and {len(y)} states given, "
+                                f"the library takes {self.n_parameters} and {2 * self.n}")
+
     def accelerations(self, t: float, y: np.ndarray, p: np.ndarray) -> np.ndarray:
         y = np.ascontiguousarray(y, dtype=float)
         p = np.ascontiguousarray(p, dtype=float)
+        self.check_sizes(p, y)
         a = np.zeros(self.n)
         status = self._lib.mechsys_accelerations(float(t), self._ptr(y), self._ptr(p), self._ptr(a))
         if status:
@@ -209,6 +218,7 @@ class NativeIntegrator:
         p = np.ascontiguousarray(p, dtype=float)
         y0 = np.ascontiguousarray(y0, dtype=float)
         t_out = np.ascontiguousarray(t_out, dtype=float)
+        self.check_sizes(p, y0)
         state = ctypes.create_string_buffer(self._state_bytes)
         Y = np.zeros((len(t_out), 2 * self.n))
         status = self._lib.mechsys_start(state, float(t_out[0]), float(t_out[-1]), self._ptr(y0), self._ptr(p),
@@ -229,8 +239,10 @@ class NativeIntegrator:
 
 
 def load(model) -> Optional[NativeIntegrator]:
-    """The model's native integrator, from the cache or compiled now; None when no compiler is available.
-    With constraints the accelerations solve [[M, A^T], [A, 0]] [q''; -lambda] = [f; b]; the caller projects."""
+    """The model's native integrator, from the cache (only when its signature verifies) or compiled now; None
+    when no compiler is available. Without a usable cache the library is built in a temporary folder that is
+    removed once it is loaded. With constraints the accelerations solve [[M, A^T], [A, 0]] [q''; -lambda] = [f; b];
+    the caller projects."""
     from mechsys.numeric import cache
 
     cached = getattr(model, "_native_integrator", False)
@@ -238,19 +250,19 @@ def load(model) -> Optional[NativeIntegrator]:
         return cached
     result = None
     if compiler() is not None:
-        folder = cache.cache_dir()
         # the library is machine code: the key names the platform as well as the model structure
         key = cache.model_key(model, f"native-{sys.platform}-{platform.machine()}")
-        target = (folder or Path(tempfile.mkdtemp(prefix="mechsys-native-"))) / f"{key}.so"
-        hit = target.exists()
-        if not hit:
+        path = cache.library(key)
+        if path is not None:
+            result = NativeIntegrator(path)
+            result.from_cache = True
+        else:
             source = model_source(model)
-            try:
-                build(source, target)
-            except OSError:  # a read-only or full cache folder only costs the reuse
-                target = Path(tempfile.mkdtemp(prefix="mechsys-native-")) / target.name
-                build(source, target)
-        result = NativeIntegrator(target)
-        result.from_cache = hit
+            with tempfile.TemporaryDirectory(prefix="mechsys-native-") as tmp:
+                built = Path(tmp) / f"{key}.so"
+                build(source, built)
+                path = cache.store_library(key, built)
+                result = NativeIntegrator(path or built)  # loaded before the temporary folder goes
+        result.key = key if path is not None else None
     model._native_integrator = result
     return result
