@@ -173,23 +173,32 @@ def reaction_source(model: MechanicalModel) -> dict:
             "m": len(lam), "expr": matrix_source(sp.Matrix(exprs), model.t, model.q, inputs, model.parameter_symbols)}
 
 
+def _reactions_from(desc: dict) -> dict:
+    from mechsys.numeric.lambdify import matrix_from_source
+
+    below = subtrees(desc["joints"])
+    membership = np.array([[x in below[link] for x in desc["links"]] for link, _parent in desc["joints"]], float)
+    return {**desc, "fn": matrix_from_source(desc["expr"]), "m": int(desc["m"]),
+            "membership": membership.reshape(len(desc["joints"]), len(desc["links"]))}
+
+
 def compiled_reactions(model: MechanicalModel) -> dict:
     """The compiled reaction function and its layout, derived once per model structure (cached on disk)."""
     cached = model.__dict__.get("_reactions_compiled")
     if cached is not None:
         return cached
     from mechsys.numeric import cache
-    from mechsys.numeric.lambdify import matrix_from_source
 
     key = cache.model_key(model, "reactions")
     desc = cache.load(key)
-    if desc is None or not {"links", "joints", "m", "expr"} <= set(desc):
+    try:
+        out = _reactions_from(desc) if desc is not None else None
+    except (KeyError, TypeError, ValueError, SyntaxError):
+        out = None  # an entry in another format, or source that is not plain arithmetic: rebuild
+    if out is None:
         desc = reaction_source(model)
         cache.store(key, desc)
-    below = subtrees(desc["joints"])
-    membership = np.array([[x in below[link] for x in desc["links"]] for link, _parent in desc["joints"]], float)
-    out = {**desc, "fn": matrix_from_source(desc["expr"]),
-           "membership": membership.reshape(len(desc["joints"]), len(desc["links"]))}
+        out = _reactions_from(desc)
     model.__dict__["_reactions_compiled"] = out
     return out
 
