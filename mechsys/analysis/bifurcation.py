@@ -44,7 +44,7 @@ def parameter_sensitivity(model: MechanicalModel, name: str):
     derivs = [sp.diff(full[s], base) for s in model.parameter_symbols]
 
     def at(values: dict[str, float]) -> np.ndarray:
-        subs = {doc.parameters[k]: v for k, v in values.items()}
+        subs = {doc.parameters[k]: sp.Float(float(v)) for k, v in values.items()}  # sympy Floats: d may be a Symbol
         return np.array([float(sp.sympify(d).xreplace(subs).evalf()) for d in derivs])
 
     return at

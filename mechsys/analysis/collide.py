@@ -98,6 +98,41 @@ class ImpactModel:
         return self._bodies
 
 
+def contact_degeneracy(model: MechanicalModel, t: float, q: np.ndarray, u: np.ndarray,
+                       p: np.ndarray) -> AnalysisError | None:
+    """An AnalysisError naming the first contact whose geometry is degenerate at (t, q): its normal velocity's
+    Jacobian, normal or relative velocity divides by zero or is not finite (coincident points, a zero radius:
+    the gap's derivative is undefined), with the parameters of its gap that are zero. None if every contact is
+    regular. Evaluated contact by contact (only when something already failed, so compiling here is fine)."""
+    args = (model.t, model.q, model.u, model.parameter_symbols)
+    values = dict(zip(model.parameter_symbols, p))
+    for c in model.kin.contacts:
+        vn = sp.Matrix([c["vn"]])
+        pieces = [model.partials(vn), vn.xreplace({w: 0 for w in model.u})]
+        if c.get("normal") is not None:
+            pieces += [c["normal"], model.partials(c["vrel"])]
+        try:
+            regular = all(np.all(np.isfinite(compile_matrix(x, *args)(t, q, u, p))) for x in pieces)
+        except (ZeroDivisionError, ValueError, OverflowError):
+            regular = False
+        if regular:
+            continue
+        shape = c["gap"] if c.get("gap") is not None else vn
+        used = [s for s in model.parameter_symbols if s in shape.free_symbols]
+        zero = [f"{s} = 0" for s in used if values[s] == 0]
+        state = ", ".join(f"{name} = {x:g}" for name, x in zip(model.coordinates, q))
+        if zero:
+            hint = f"; its gap uses {' and '.join(zero)} (a zero size: the contact points coincide)"
+        elif used:
+            hint = f"; check the parameters in its gap ({', '.join(f'{s} = {values[s]:g}' for s in used)})"
+        else:
+            hint = ""
+        return AnalysisError(f"contact {c['name']!r}: degenerate geometry at {state or 'this state'}: the contact "
+                             f"normal (the derivative of its gap) is undefined (a division by zero or not finite)"
+                             f"{hint}")
+    return None
+
+
 def _tangent_basis(n: np.ndarray, Jr: np.ndarray) -> np.ndarray:
     """Orthonormal rows spanning the tangent directions (normal to n) in which the contact can slide at all:
     2 rows for a 3-D contact, 1 for a planar one, 0 when no rate moves the contact point tangentially."""
@@ -126,8 +161,17 @@ def resolve(model: MechanicalModel, contact: str | None = None, q: np.ndarray | 
     if contact is not None and contact not in im.names:
         raise InputError(f"--impact {contact}: unknown contact{model.doc.suggest(contact, im.names)} "
                          f"(choose from {', '.join(im.names)})")
-    M, J, A = im.M(t, q, u, p), im.J(t, q, u, p), im.A(t, q, u, p)
-    vt = im.vn_t(t, q, u, p).ravel()
+    try:
+        M, J, A = im.M(t, q, u, p), im.J(t, q, u, p), im.A(t, q, u, p)
+        vt = im.vn_t(t, q, u, p).ravel()
+        geometry = [im.Jr(t, q, u, p), im.vr_t(t, q, u, p), im.normals(t, q, u, p)]
+    except (ZeroDivisionError, ValueError, OverflowError):
+        M = J = A = vt = None
+        geometry = []
+    if M is None or not all(np.all(np.isfinite(x)) for x in (M, J, A, vt, *geometry)):
+        raise contact_degeneracy(model, t, q, u, p) or AnalysisError(
+            "the impact equations are not finite at this state (a division by zero in the mass matrix or the "
+            "constraints: check the parameters)")
     v_before = J @ u + vt
     candidates = [k for k, name in enumerate(im.names) if (contact is None or name == contact)
                   and (only is None or name in only)]

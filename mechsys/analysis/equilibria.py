@@ -22,12 +22,19 @@ def wrap(angle: float) -> float:
 def parameter_values(model: MechanicalModel, changes: dict[str, float] | None = None) -> np.ndarray:
     """Numeric parameter vector (model.parameter_symbols order) with some parameters set to new values; the
     parameters defined from them follow (dM = Mo/7 moves with Mo)."""
-    changes = changes or {}
-    values: dict[sp.Symbol, float] = {}
-    for name, expr in model.doc.parameter_exprs.items():
-        sym = model.doc.parameters[name]
-        values[sym] = float(changes[name]) if name in changes else float(expr.xreplace(values).evalf())
-    return np.array([values[s] for s in model.parameter_symbols], dtype=float)
+    doc = model.doc
+    if not changes:
+        return np.array([doc.parameter_values[n] for n in doc.parameters], dtype=float)
+    # sympy Floats, not Python floats: for an alias ``m1: m2`` the xreplace returns the value itself
+    values: dict[sp.Symbol, sp.Float] = {}
+    for name, expr in doc.parameter_exprs.items():  # in dependency order
+        sym = doc.parameters[name]
+        if name in changes:
+            values[sym] = sp.Float(float(changes[name]))
+        else:
+            known = {s: values[s] for s in expr.free_symbols if s in values}
+            values[sym] = sp.Float(float(sp.sympify(expr.xreplace(known)).evalf()))
+    return np.array([float(values[s]) for s in model.parameter_symbols], dtype=float)
 
 
 @dataclass
@@ -168,6 +175,8 @@ class EquilibriumProblem:
 
     def J(self, z: np.ndarray, p: np.ndarray) -> np.ndarray:
         n = len(self.unknowns)
+        if n == 0:  # nothing to solve for (every coordinate cyclic with its rate fixed): sympy refuses jacobian([])
+            return np.zeros((len(self.residual_exprs), 0))
         return np.array(self._J(*z, *self.extra(), *p), dtype=float).reshape(len(self.residual_exprs), n)
 
     def Fp(self, z: np.ndarray, p: np.ndarray) -> np.ndarray:
@@ -357,6 +366,8 @@ def find_equilibria(model: MechanicalModel, search: dict[str, tuple[float, float
 
     problem = EquilibriumProblem(model)
     p = parameter_values(model)
+    if not problem.unknowns:
+        return _every_state(problem, p, search)
     roots = solve_equilibria(problem, p, search, starts, seed)
     message = ""
     isolated = []
@@ -379,3 +390,27 @@ def find_equilibria(model: MechanicalModel, search: dict[str, tuple[float, float
     if not equilibria:
         message = "no equilibrium found in the search box (multistart search; widen it with --search)"
     return EquilibriaResult(equilibria, message, problem.cyclic, dict(problem.fixed_rates))
+
+
+def _every_state(problem: EquilibriumProblem, p: np.ndarray, search: dict | None) -> EquilibriaResult:
+    """No unknowns: every coordinate is cyclic and nothing acts on it at rest (free carriages, a free rotor), so
+    each configuration is a steady motion at the rates the file gives (an equilibrium when they are zero). One
+    representative, its stability (of the rates), and a message that says so."""
+    from mechsys.analysis.stability import assess
+
+    _boxes(problem, search)  # an unknown --search name is still an input error
+    model = problem.model
+    if not model.coordinates:
+        return EquilibriaResult([], "the model has no free coordinates: there is nothing to find")
+    e = problem.equilibrium(np.zeros(0))
+    assess(problem, e, p)
+    rates = ", ".join(f"der({c}) = {v:g}" for c, v in problem.fixed_rates.items())
+    if any(v != 0 for v in problem.fixed_rates.values()):
+        what = (f"every configuration is a steady motion at the initial rates ({rates}); with all rates zero every "
+                "configuration is an equilibrium")
+    else:
+        what = f"every configuration is an equilibrium ({rates})"
+    message = (f"no generalized force acts at rest on any coordinate ({', '.join(model.coordinates)} are all cyclic): "
+               f"{what}; the equilibria are not isolated, one representative is shown")
+    return EquilibriaResult([e], message, problem.cyclic, dict(problem.fixed_rates))
+

@@ -65,10 +65,43 @@ def eigen(A: np.ndarray, B: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
     return vals[order], J
 
 
+def singular_pencil(A: np.ndarray, B: np.ndarray) -> bool:
+    """det(A - s B) vanishes for every s: the linearized equations do not determine the motion (a coordinate with
+    neither mass nor inertia on which nothing acts), and any 'eigenvalue' of the pencil is meaningless."""
+    if A.size == 0:
+        return False
+    rng = np.random.default_rng(11)
+    for _ in range(2):
+        s = complex(rng.uniform(-3, 3), rng.uniform(-3, 3))
+        sv = np.linalg.svd(A - s * B, compute_uv=False)
+        if sv[-1] > 1e-12 * A.shape[0] * max(1.0, float(sv[0])):
+            return False
+    return True
+
+
+def massless_coordinates(problem, e) -> list[str]:
+    """Coordinates whose row of the mass matrix vanishes at the equilibrium (no mass or inertia moves with them)."""
+    model = problem.model
+    q, u = state_at(model, e.coordinates, e.rates)
+    M = pieces(model).evaluate(q, u, np.array(e.multipliers), problem_parameters(problem))["M"]
+    scale = max(1e-300, float(np.max(np.abs(M)))) if M.size else 1.0
+    return [c for i, c in enumerate(model.coordinates) if np.max(np.abs(M[i, :])) <= 1e-12 * scale]
+
+
 def assess(problem, e, p: np.ndarray) -> None:
     """Fill eigenvalues, Jacobian and verdict of equilibrium ``e`` in place."""
     problem.current_parameters = p
     A, B, _N = reduced_pencil(problem, e)
+    if singular_pencil(A, B):
+        names = massless_coordinates(problem, e)
+        who = (f"{', '.join(names)} carr{'ies' if len(names) == 1 else 'y'} no mass or inertia" if names
+               else "a combination of the coordinates carries no mass or inertia")
+        e.eigenvalues, e.jacobian, e.critical = np.zeros(0, complex), None, False
+        e.stability = "undecided"
+        them = "it" if len(names) == 1 else "them"
+        e.reason = (f"the linearized equations do not determine the motion: {who} and no stiffness or damping "
+                    f"acts on {them} (a singular pencil); give {them} mass or inertia, or make {them} prescribed")
+        return
     vals, J = eigen(A, B)
     e.eigenvalues, e.jacobian = vals, J
     scale = max(1.0, float(np.max(np.abs(vals)))) if len(vals) else 1.0
@@ -122,7 +155,10 @@ def energy_verdict(problem, e, p: np.ndarray, zero_count: int) -> tuple[str, str
     dissipative, complete, why, positional = _dissipation(problem, e, p)
     if not dissipative:
         return "undecided", prefix + why
-    U, qn = _effective_potential(problem, e)
+    try:
+        U, qn = _effective_potential(problem, e)
+    except _MasslessCyclic as exc:
+        return "undecided", prefix + str(exc)
     q0 = np.array([e.coordinates[c] for c in problem.free], dtype=float)
     if not qn:
         return "stable", prefix + "no positional degrees of freedom and no energy input"
@@ -199,6 +235,10 @@ def _dissipation(problem, e, p: np.ndarray) -> tuple[bool, bool, str, np.ndarray
     return True, complete, "", (positional + positional.T) / 2
 
 
+class _MasslessCyclic(Exception):
+    """The cyclic block of the mass matrix is singular: no Routh potential."""
+
+
 def _effective_potential(problem, e) -> tuple[sp.Expr, list[sp.Symbol]]:
     """U = V - T0 (rates of non-cyclic coordinates at zero), plus Routh's term for conserved cyclic momenta."""
     model = problem.model
@@ -207,16 +247,25 @@ def _effective_potential(problem, e) -> tuple[sp.Expr, list[sp.Symbol]]:
     cyc_u = [model.doc.rates[c] for c in problem.cyclic]
     all_rest = {**rest_nc, **{u: 0 for u in cyc_u}, model.t: 0}
     U = V.xreplace({model.t: 0}) - T.xreplace(all_rest)
+    Tc = T.xreplace({**rest_nc, model.t: 0})
+    # a cyclic coordinate whose rate is absent from T has neither momentum nor a Routh term (no mass moves with it)
+    cyc_u = [w for w in cyc_u if w in Tc.free_symbols]
     if cyc_u:
-        Tc = T.xreplace({**rest_nc, model.t: 0})
         Mcc = sp.hessian(Tc, cyc_u)
         b = sp.Matrix([sp.diff(Tc, u) for u in cyc_u]).xreplace({u: 0 for u in cyc_u})
         # conserved momenta p = Mcc u_c + b at the steady motion, as numbers
         q0 = {model.doc.coords[c]: e.coordinates[c] for c in problem.free}
         q0.update({model.doc.coords[c]: 0 for c in problem.cyclic})
-        values = dict(zip(model.parameter_symbols, problem_parameters(problem)))
-        uc = sp.Matrix([e.rates[c] for c in problem.cyclic])
+        values = {s: sp.Float(float(v)) for s, v in zip(model.parameter_symbols, problem_parameters(problem))}
+        names = [c for c in problem.cyclic if model.doc.rates[c] in cyc_u]
+        uc = sp.Matrix([e.rates[c] for c in names])
         pmom = (Mcc * uc + b).xreplace(q0).xreplace(values).evalf()
+        Mnum = np.array(Mcc.xreplace(q0).xreplace(values).evalf(), dtype=float)
+        if np.linalg.matrix_rank(Mnum, tol=1e-12 * max(1e-300, float(np.max(np.abs(Mnum))))) < len(cyc_u):
+            zero = [c for i, c in enumerate(names) if abs(Mnum[i, i]) <= 1e-12 * max(1e-300, float(np.max(np.abs(Mnum))))]
+            raise _MasslessCyclic(
+                f"the cyclic coordinate(s) {', '.join(zero or names)} carry no mass or inertia at this state "
+                f"(singular inertia of the cyclic block), so Routh's amended potential is not defined")
         U = U + ((pmom - b).T * Mcc.inv() * (pmom - b))[0] / 2  # inverse of the small cyclic block only
         U = U.xreplace({model.doc.coords[c]: 0 for c in problem.cyclic})
     qn = [model.doc.coords[c] for c in problem.free]
@@ -247,7 +296,7 @@ def _higher_order(U: sp.Expr, qn: list, problem, q0: np.ndarray, p: np.ndarray, 
     """First non-vanishing derivative (order 3..6) of U along q0 + s v at s = 0."""
     s = sp.Symbol("s_dir", real=True)
     line = U.xreplace({q: float(q0[i]) + float(v[i]) * s for i, q in enumerate(qn)})
-    line = line.xreplace(dict(zip(problem.model.parameter_symbols, [float(x) for x in p])))
+    line = line.xreplace({s: sp.Float(float(x)) for s, x in zip(problem.model.parameter_symbols, p)})
     deriv = sp.diff(line, s, 2)
     terms = []
     for order in range(3, 7):

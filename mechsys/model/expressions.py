@@ -2,8 +2,10 @@
 from __future__ import annotations
 
 import difflib
+import math
 import re
 from dataclasses import dataclass
+from fractions import Fraction
 from typing import Callable, Mapping
 
 import sympy as sp
@@ -49,7 +51,12 @@ _TOKEN = re.compile(
     r"|(?P<op>\*\*|[-+*/^(),]))"
 )
 _MAX_LENGTH = 4000
+#: Nesting levels: parentheses, function arguments, unary signs and exponents each count one.
 _MAX_DEPTH = 100
+#: Exact numbers (numerators, denominators) written or built while parsing have at most this many digits
+#: (a double has 17): sympy computes powers, sums and products of rationals exactly and factors the bases of
+#: roots, so (10**-300)**(10**6), a sum of 1/(10**999 + k) or sqrt(3**2000 + 1) would run for seconds to hours.
+_MAX_DIGITS = 100
 
 
 @dataclass(frozen=True)
@@ -78,9 +85,14 @@ def _tokenize(text: str) -> list[_Tok]:
     return toks
 
 
-def _number(text: str) -> sp.Expr:
-    if len(text.split("e")[0].split("E")[0]) > 300:
-        raise ExpressionError("number too large")
+def _number(text: str, pos: int = 0) -> sp.Expr:
+    mantissa, _, exp10 = text.lower().partition("e")
+    if len(mantissa.replace(".", "")) > _MAX_DIGITS:
+        raise ExpressionError(f"number literal longer than {_MAX_DIGITS} digits", pos)
+    # 1e999999999 (or 1e-999999999) would be an exact number of a billion digits: bound it before building it
+    if exp10 and (len(exp10) > 6 or abs(int(exp10)) > _MAX_DIGITS):
+        raise ExpressionError(f"number {text!r} out of range (an exact number has at most {_MAX_DIGITS} digits)",
+                              pos)
     if re.fullmatch(r"\d+", text):
         return sp.Integer(int(text))
     # Decimal literals become exact rationals so textbook formulas stay exact.
@@ -122,56 +134,75 @@ class _Parser:
             raise ExpressionError(f"unexpected {tok.text!r}", tok.pos)
         return expr
 
-    def expr(self) -> sp.Expr:
+    def enter(self, pos: int) -> None:
+        """One more nesting level (parenthesis, call argument, unary sign, exponent); every recursion of the
+        parser passes here, so no input can exhaust Python's stack."""
         self.depth += 1
         if self.depth > _MAX_DEPTH:
-            raise ExpressionError("expression nested too deeply", self.peek().pos)
-        left = self.term()
+            raise ExpressionError(f"expression nested too deeply (more than {_MAX_DEPTH} levels of parentheses, "
+                                  "calls, signs or powers)", pos)
+
+    def expr(self, opened_at: int | None = None) -> sp.Expr:
+        """A sum; ``opened_at`` is the column of the parenthesis or call that opens this level (for errors)."""
+        start = self.peek().pos
+        self.enter(start if opened_at is None else opened_at)
+        terms = [self.term()]
         while self.peek().text in ("+", "-"):
             op = self.take().text
             right = self.term()
-            left = left + right if op == "+" else left - right
+            terms.append(right if op == "+" else -right)
         self.depth -= 1
-        return left
+        if len(terms) == 1:
+            return terms[0]
+        _check_sum(terms, start)
+        return sp.Add(*terms)  # one flatten for the whole sum: linear, not quadratic, in the number of terms
 
     def term(self) -> sp.Expr:
-        left = self.unary()
+        start = self.peek().pos
+        factors = [self.unary()]
         while self.peek().text in ("*", "/"):
             op = self.take()
             right = self.unary()
             if op.text == "/":
                 if right == 0:
                     raise ExpressionError("division by zero", op.pos)
-                left = left / right
+                factors.append(1 / right)
             else:
-                left = left * right
-        return left
+                factors.append(right)
+        if len(factors) == 1:
+            return factors[0]
+        _check_product(factors, start)
+        return sp.Mul(*factors)
 
     def unary(self) -> sp.Expr:
-        if self.peek().text == "-":
+        tok = self.peek()
+        if tok.text in ("-", "+"):
             self.take()
-            return -self.unary()
-        if self.peek().text == "+":
-            self.take()
-            return self.unary()
+            self.enter(tok.pos)
+            inner = self.unary()
+            self.depth -= 1
+            return -inner if tok.text == "-" else inner
         return self.power()
 
     def power(self) -> sp.Expr:
         base = self.atom()
         if self.peek().text in ("**", "^"):
             op = self.take()
+            self.enter(op.pos)
             exponent = self.unary()  # right associative, allows 2**-1
+            self.depth -= 1
             if base.is_number and exponent.is_number and _too_large(base, exponent):
-                raise ExpressionError("number too large", op.pos)
+                raise ExpressionError(f"number too large (an exact number has at most {_MAX_DIGITS} digits)",
+                                      op.pos)
             return base**exponent
         return base
 
     def atom(self) -> sp.Expr:
         tok = self.take()
         if tok.kind == "num":
-            return _number(tok.text)
+            return _number(tok.text, tok.pos)
         if tok.text == "(":
-            inner = self.expr()
+            inner = self.expr(tok.pos)
             self.expect(")")
             return inner
         if tok.kind == "name":
@@ -217,10 +248,10 @@ class _Parser:
             hint = f" (did you mean {close[0]!r}?)" if close else ""
             raise ExpressionError(f"unknown function {tok.text!r}{hint}", tok.pos)
         fn, arity = FUNCTIONS[tok.text]
-        args = [self.expr()]
+        args = [self.expr(tok.pos)]
         while self.peek().text == ",":
             self.take()
-            args.append(self.expr())
+            args.append(self.expr(tok.pos))
         self.expect(")")
         if arity is None and len(args) < 2:
             raise ExpressionError(f"{tok.text}() takes at least 2 arguments", tok.pos)
@@ -232,21 +263,102 @@ class _Parser:
             except (OverflowError, TypeError, ValueError):
                 big = True
             if big:
-                raise ExpressionError("number too large", tok.pos)
+                raise ExpressionError(f"number too large: {tok.text}() of more than 700", tok.pos)
         return fn(*args)
 
 
-def _too_large(base: sp.Expr, exponent: sp.Expr) -> bool:
-    """Would base**exponent be an astronomically large (slow to compute) number?"""
-    import math
+def _digits(n: int) -> float:
+    """Decimal digits of a (possibly huge) positive integer, without converting it to text."""
+    return math.log10(n) if n > 0 else 0.0
 
+
+def _rational_digits(r: sp.Rational) -> float:
+    """Digits of the longer of the numerator and the denominator."""
+    return max(_digits(abs(int(r.p))), _digits(int(r.q)))
+
+
+def _exact_digits(expr: sp.Expr, times: sp.Expr = sp.Integer(1)) -> float:
+    """Digits of the exact rational numbers sympy computes for ``expr**times`` when ``expr`` is a number: a
+    product of powers b**k contributes |k*times|*digits(b) for each rational base b (sqrt(2)**2000 is the integer
+    2**1000). Other factors (pi, 1 + sqrt(2), sin(1)) stay symbolic: they count the digits of their magnitude.
+    Infinite when the size cannot be bounded."""
+    total = 0.0
+    for b, k in expr.as_powers_dict().items():
+        try:
+            power = abs(complex(k * times))
+        except (OverflowError, TypeError, ValueError):
+            return math.inf
+        if b.is_Rational:
+            if b.q == 1 and abs(b.p) <= 1:
+                continue  # 0, 1, -1: any power is trivial
+            total += power * _rational_digits(b)
+            continue
+        if not b.is_number:
+            continue
+        if power > 1e6:
+            return math.inf
+        try:
+            magnitude = abs(complex(b.evalf(15)))
+        except (OverflowError, TypeError, ValueError):
+            return math.inf
+        if magnitude == 0 or magnitude == math.inf or magnitude != magnitude:
+            return math.inf
+        total += power * abs(math.log10(magnitude))
+    return total
+
+
+def _too_large(base: sp.Expr, exponent: sp.Expr) -> bool:
+    """Would base**exponent be an exact number of more than _MAX_DIGITS digits (slow to compute, too long to
+    print)? Bounds |exponent|*digits for every base: large ones, fractions ((1/2)**(10**5)), negative exponents
+    and decimals close to 1 (1.0000001**(10**9) has 7*10**9 digits exactly)."""
     try:
-        b, e = abs(complex(base)), abs(complex(exponent))
+        if abs(complex(exponent)) > 1e9:
+            return not (base.is_Rational and base.q == 1 and abs(base.p) <= 1)
     except (OverflowError, TypeError, ValueError):
         return True
-    if e > 1e6 or b > 1e300:
-        return True
-    return b > 1 and e * math.log10(b) > 1000
+    return _exact_digits(base, exponent) > _MAX_DIGITS
+
+
+def _fraction_digits(value: Fraction) -> float:
+    return max(_digits(abs(value.numerator)), _digits(value.denominator))
+
+
+def _too_long(pos: int) -> ExpressionError:
+    return ExpressionError(f"number too large (an exact number has at most {_MAX_DIGITS} digits)", pos)
+
+
+def _check_sum(terms: list[sp.Expr], pos: int) -> None:
+    """Refuse a sum whose exact rational coefficients would exceed _MAX_DIGITS digits. The coefficients of like
+    terms are added here first, as sympy will (a sum of 1/(10**99 + k) has a denominator of thousands of digits
+    and sympy's gcds on it take minutes), stopping at the first one that grows too long."""
+    groups: dict[sp.Expr, Fraction] = {}
+    for term in terms:
+        for part in sp.Add.make_args(term):
+            c, rest = part.as_coeff_Mul()
+            if not c.is_Rational:
+                continue
+            total = groups.get(rest, Fraction(0)) + Fraction(int(c.p), int(c.q))
+            if _fraction_digits(total) > _MAX_DIGITS:
+                raise _too_long(pos)
+            groups[rest] = total
+
+
+def _check_product(factors: list[sp.Expr], pos: int) -> None:
+    """Refuse a product whose exact rational part would exceed _MAX_DIGITS digits: the rational coefficients
+    multiply, and sympy combines powers of rational bases (sqrt(N)*sqrt(N) = N, sqrt(2)*sqrt(3) = sqrt(6)) and
+    factors the combined base, so their digits count too."""
+    coefficient = Fraction(1)
+    roots = 0.0
+    for factor in factors:
+        for g in sp.Mul.make_args(factor):
+            if g.is_Rational:
+                coefficient *= Fraction(int(g.p), int(g.q))
+            elif g.is_Pow and g.base.is_Rational and g.exp.is_Rational:
+                roots += max(1.0, abs(float(g.exp))) * _rational_digits(g.base)
+            else:
+                continue
+            if _fraction_digits(coefficient) + roots > _MAX_DIGITS:
+                raise _too_long(pos)
 
 
 def parse_expression(
