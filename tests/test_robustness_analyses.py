@@ -178,6 +178,14 @@ def test_collide_zero_radius_names_the_contact_and_the_parameter():
     assert "r = 0" in err
 
 
+@pytest.mark.parametrize("command", ["simulate", "bench"])
+def test_simulate_zero_radius_names_the_contact_and_the_parameter(command):
+    """The impact loop evaluates the gaps before any impact is resolved: the same clear message, not
+    ZeroDivisionError."""
+    err = analysis_error(command, CRADLE, "--set", "r=0", "--t-end", "0.2")
+    assert "contact 'c23'" in err and "r = 0" in err
+
+
 def test_collide_regular_cradle_still_resolves():
     """Equal balls on equal strings, e = 1, ball 1 arriving at rate w: it stops and ball 2 leaves with w."""
     data = ok_json("collide", CRADLE, "--set", "th1=0", "--set", "der(th1)=2")

@@ -2,8 +2,8 @@
 from __future__ import annotations
 
 import numpy as np
-from scipy.integrate import solve_ivp
 
+from mechsys.analysis.events import solve_ivp  # events located inside steps (near-tangential touches)
 from mechsys.errors import AnalysisError
 
 
@@ -40,6 +40,23 @@ def _lift_off_functions(rhs, c, p) -> list:
     return fns
 
 
+def contact_state(model, c, p, t: float, q: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(gaps, normal velocities) of the gap contacts at (t, q, u); an AnalysisError naming the contact when its
+    geometry is degenerate there (a zero radius: the gap's derivative divides by zero)."""
+    from mechsys.analysis.collide import contact_degeneracy
+
+    try:
+        with np.errstate(all="ignore"):
+            gaps, vn = c.gaps(t, q, u, p).ravel(), c.gap_A(t, q, u, p) @ u
+    except (ZeroDivisionError, ValueError, OverflowError):
+        gaps = vn = np.array([np.nan])
+    if not (np.all(np.isfinite(gaps)) and np.all(np.isfinite(vn))):
+        raise contact_degeneracy(model, t, q, u, p) or AnalysisError(
+            f"the contact gaps or their rates are not finite at t = {t:.6g} (a division by zero in a gap: check "
+            "the parameters)")
+    return gaps, vn
+
+
 def integrate_with_impacts(model, c, rhs, p, grid, y0, method, rtol, atol, event_fns, note_events,
                             capture_velocity):
     """Segments between impacts: gap = 0 (closing) stops the integrator, the impulse law gives the velocities of
@@ -50,7 +67,7 @@ def integrate_with_impacts(model, c, rhs, p, grid, y0, method, rtol, atol, event
     turns tensile (an event), and a touching contact at rest that opens ends the segment once its gap exceeds a
     small threshold, so that its next closing is an event again."""
     from mechsys.analysis.collide import joint_impulses, resolve
-    from mechsys.analysis.simulate import project
+    from mechsys.analysis.simulate import check_on_manifold, project
 
     n = c.n
     impacts: list[dict] = []
@@ -66,8 +83,7 @@ def integrate_with_impacts(model, c, rhs, p, grid, y0, method, rtol, atol, event
         if guard > 100000 + (len(grid) if c.m else 0):
             raise AnalysisError("more than 100000 impacts: increase the capture velocity")
         q0, u0 = y[:n], y[n:]
-        gaps0 = c.gaps(t, q0, u0, p).ravel()
-        vn0 = c.gap_A(t, q0, u0, p) @ u0  # (gap contacts are scleronomic here)
+        gaps0, vn0 = contact_state(model, c, p, t, q0, u0)  # (gap contacts are scleronomic here)
         touching0 = np.abs(gaps0) <= 1e-9 * (1 + np.max(np.abs(q0)))
         at_rest = [k for k in range(len(c.gap_names)) if k not in rhs.persistent and touching0[k]
                    and abs(vn0[k]) <= 1e-12 * max(1.0, np.max(np.abs(u0)))]
@@ -129,6 +145,7 @@ def integrate_with_impacts(model, c, rhs, p, grid, y0, method, rtol, atol, event
             if seg_end >= t_end:
                 break
             q, u = project(c, p, seg_end, sol.y[:n, -1], sol.y[n:, -1])
+            check_on_manifold(c, p, seg_end, q, u)
             t, y = seg_end, np.concatenate([q, u])
             states[-1] = y
             continue
@@ -183,6 +200,7 @@ def integrate_with_impacts(model, c, rhs, p, grid, y0, method, rtol, atol, event
         u_new = sequential_impacts(model, c, p, t, q, u_new, rhs, impacts, resolve)
         if c.m:
             q, u_new = project(c, p, t, q, u_new)
+            check_on_manifold(c, p, t, q, u_new)
         y = np.concatenate([q, u_new])
         times.append(t)
         states.append(y)
@@ -209,8 +227,7 @@ def sequential_impacts(model, c, p, t, q, u, rhs, impacts, resolve) -> np.ndarra
     """Touching contacts that approach after an impact collide at the same instant, one after another
     (Krodkiewski problem 55): repeat until no touching contact approaches."""
     for _ in range(1000):
-        gaps = c.gaps(t, q, u, p).ravel()
-        vn = c.gap_A(t, q, u, p) @ u
+        gaps, vn = contact_state(model, c, p, t, q, u)
         scale = 1e-12 * max(1.0, float(np.max(np.abs(u))))
         approaching = [c.gap_names[k] for k in range(len(c.gap_names)) if k not in rhs.persistent
                        and abs(gaps[k]) <= 1e-9 * (1 + np.max(np.abs(q))) and vn[k] < -scale]

@@ -16,6 +16,10 @@ if TYPE_CHECKING:  # sympy and the model are imported only where used: a warm ru
 
 METHODS = ("auto", "native", "CVODE", "RK45", "DOP853", "Radau", "BDF", "LSODA")
 EVALUATIONS_PER_STEP = 20  # the scipy and CVODE paths count the step budget in right-hand-side evaluations
+RESIDUAL_TOLERANCE = 1e-6  # a projected state must satisfy the constraints to 1e-6 x (1 + max |q|, |q'|)
+BUDGET_WINDOW = 10_000  # RHS evaluations between two checks of the pace of a scipy or CVODE run against its budget
+SLOW_WINDOWS = 3  # consecutive windows whose pace would overspend the budget before a run is stopped (a transient
+# that starts slowly, like the initial layer of a stiff scene at a tight tolerance, speeds up within one or two)
 
 # auto runs CVODE at rtol/100: at equal rtol its error is 30-100x Radau's (benchmarks/stiff.py)
 CVODE_TIGHTENING = 100.0
@@ -168,6 +172,10 @@ class RightHandSide:
         self.p = p
         self.calls = 0
         self.max_calls = max_calls  # the step budget of the scipy and CVODE paths, in evaluations
+        self.horizon = float("inf")  # t_end, for the pace check (set by simulate)
+        self.front = -float("inf")  # the latest time evaluated so far
+        self.window_front = None  # the front at the start of the current window of BUDGET_WINDOW evaluations
+        self.slow_windows = 0  # consecutive windows at a pace that would overspend the budget
         self.persistent = []
         self.progress = progress  # progress(t), called every 200 evaluations
 
@@ -193,10 +201,33 @@ class RightHandSide:
             np.linalg.solve(K, np.concatenate([f, b]))
         return sol[:n], -sol[n:]
 
+    def _check_pace(self) -> None:
+        """Stop now when the pace of the last SLOW_WINDOWS windows of BUDGET_WINDOW evaluations would each spend the
+        budget before t_end: a chattering law or a stiff scene on an explicit method then fails in seconds, not
+        after hours of Python evaluations."""
+        start, self.window_front = self.window_front, self.front
+        if start is None or not np.isfinite(self.horizon):
+            return
+        progress, remaining = self.front - start, self.horizon - self.front
+        needed = remaining / progress * BUDGET_WINDOW if progress > 0 else float("inf")
+        self.slow_windows = self.slow_windows + 1 if remaining > 0 and needed > self.max_calls - self.calls else 0
+        if self.slow_windows >= SLOW_WINDOWS:
+            pace = f"advanced {progress:.3g} s; at that pace the remaining {remaining:.3g} s would need about " \
+                f"{needed:.3g} evaluations" if progress > 0 else "did not advance the time at all"
+            raise AnalysisError(f"integration stopped at t = {self.front:.6g}: {BUDGET_SPENT} (the last "
+                                f"{BUDGET_WINDOW} right-hand-side evaluations {pace}, with "
+                                f"{self.max_calls - self.calls:.3g} left of the budget of {self.max_calls:.3g}; "
+                                "raise --max-steps if the run is only slow to start)")
+
     def __call__(self, t: float, y: np.ndarray) -> np.ndarray:
         self.calls += 1
         if self.calls > self.max_calls:
             raise AnalysisError(f"integration stopped at t = {t:.6g}: {BUDGET_SPENT}")
+        self.front = max(self.front, t)
+        if self.window_front is None:
+            self.window_front = t
+        if self.calls % BUDGET_WINDOW == 0:
+            self._check_pace()
         if self.progress is not None and self.calls % 200 == 0:
             self.progress(t)
         n = self.c.n
@@ -238,6 +269,58 @@ def project(c: Compiled, p: np.ndarray, t: float, q: np.ndarray, u: np.ndarray) 
     r = c.cv(t, q, u, p).ravel()  # A u + a_t: rheonomic drive constraints have a_t = -p'(t)
     u = u - np.linalg.lstsq(A, r, rcond=None)[0]
     return q, u
+
+
+def residual_tolerance(q: np.ndarray, u: np.ndarray) -> float:
+    """The largest constraint residual a projected state may keep: RESIDUAL_TOLERANCE x (1 + max |q|, |q'|).
+    A converged projection leaves ~1e-14; more means no nearby state satisfies the constraints."""
+    return RESIDUAL_TOLERANCE * (1.0 + max(float(np.max(np.abs(q), initial=0.0)),
+                                           float(np.max(np.abs(u), initial=0.0))))
+
+
+def singularity_note(c: Compiled, p: np.ndarray, t: float, y: np.ndarray) -> str:
+    """Why a closed loop's integration may have failed at (t, y): '' unless its constraint Jacobian is (nearly)
+    singular there, i.e. a dead-centre or locked configuration that the motion runs into."""
+    if not c.m:
+        return ""
+    n = c.n
+    with np.errstate(all="ignore"):
+        A = c.A(t, y[:n], y[n:], p)
+        if not np.all(np.isfinite(A)) or not A.size:
+            return ""
+        s = np.linalg.svd(A, compute_uv=False)
+    ratio = float(s[-1] / s[0]) if s[0] > 0 and len(s) == A.shape[0] else 0.0
+    if ratio > 1e-4:
+        return ""
+    return (f" (the constraint Jacobian is nearly singular at t = {t:.6g}: smallest/largest singular value "
+            f"{ratio:.2g}; the loop reaches a dead-centre or locked configuration)")
+
+
+def check_on_manifold(c: Compiled, p: np.ndarray, t: float, q: np.ndarray, u: np.ndarray) -> None:
+    """AnalysisError (with the time, the residual, the tolerance and the likely reason) when a projected state is
+    not on the constraints, instead of integrating on from a state that violates them."""
+    if not c.m:
+        return
+    with np.errstate(all="ignore"):
+        finite = np.all(np.isfinite(q)) and np.all(np.isfinite(u))
+        res = max(float(np.max(np.abs(c.phi(t, q, u, p)), initial=0.0)),
+                  float(np.max(np.abs(c.cv(t, q, u, p)), initial=0.0))) if finite else float("nan")
+    tol = residual_tolerance(q, u) if finite else RESIDUAL_TOLERANCE
+    if np.isfinite(res) and res <= tol:
+        return
+    if not np.isfinite(res):
+        raise AnalysisError(f"the state or its constraint residual is not finite at t = {t:.6g} s: the motion "
+                            "left the constraint manifold (a singular configuration of the constraints?)")
+    with np.errstate(all="ignore"):
+        A = c.A(t, q, u, p)
+        rank = int(np.linalg.matrix_rank(A)) if np.all(np.isfinite(A)) else -1
+    why = (f"the constraint Jacobian is rank deficient there (rank {rank} of {A.shape[0]} rows): conflicting or "
+           "redundant constraints or drives, or a singular (dead-centre, locked) configuration"
+           if 0 <= rank < A.shape[0] else "no nearby state satisfies the constraints")
+    when = "the initial state cannot be assembled onto the constraints" if t == 0.0 else \
+        "the motion left the constraint manifold"
+    raise AnalysisError(f"the constraint residual reached {res:.3g} at t = {t:.6g} s (tolerance {tol:.3g}): {when} "
+                        f"(projection did not converge: {why})")
 
 
 def _event_functions(model: MechanicalModel, c: Compiled, p: np.ndarray) -> list:
@@ -299,7 +382,7 @@ def cvode_usable(c: Compiled, required: bool) -> bool:
 def ivp_solver(chosen: str):
     """solve_ivp, or CVODE behind the same call signature (the subset simulate uses)."""
     if chosen != "CVODE":
-        from scipy.integrate import solve_ivp
+        from mechsys.analysis.events import solve_ivp  # events located inside steps, not only at step ends
 
         return solve_ivp
     from mechsys.analysis import sundials
@@ -346,8 +429,10 @@ def native_projected(nat, c: Compiled, p: np.ndarray, grid: np.ndarray, y0: np.n
         if run.status == -2:
             return None, calls, run.t_reached
         if run.status:
-            raise AnalysisError(f"integration failed at t = {run.t_reached:.6g}: {run.message}")
+            raise AnalysisError(f"integration failed at t = {run.t_reached:.6g}: {run.message}"
+                                f"{singularity_note(c, p, float(a), y)}")
         q, u = project(c, p, float(b), run.y[-1, :n], run.y[-1, n:])
+        check_on_manifold(c, p, float(b), q, u)
         y = np.concatenate([q, u])
         ys.append(y)
         if progress is not None and k % 50 == 49:
@@ -376,6 +461,7 @@ def _start(model: MechanicalModel, c: Compiled, p: np.ndarray) -> tuple[np.ndarr
     """The consistent initial state and what the summary should say about it (assembly, conditioning)."""
     guess_q, guess_u = file_state(model)
     q0, u0 = project(c, p, 0.0, guess_q, guess_u)
+    check_on_manifold(c, p, 0.0, q0, u0)
     warnings = []
     moved = [f"{name} = {qa:.10g} (guess {qg:.10g})" for name, qa, qg in zip(model.coordinates, q0, guess_q)
              if abs(qa - qg) > 1e-9 * (1 + abs(qg))]
@@ -400,9 +486,11 @@ def _closed_loop_scipy(rhs: RightHandSide, c: Compiled, p: np.ndarray, grid: np.
     for a, b in zip(grid[:-1], grid[1:]):
         sol = solve_ivp(rhs, (a, b), y, method=method, rtol=rtol, atol=atol, events=event_fns or None)
         if not sol.success:
-            raise AnalysisError(f"integration failed at t = {sol.t[-1]:.6g}: {sol.message}")
+            raise AnalysisError(f"integration failed at t = {sol.t[-1]:.6g}: {sol.message}"
+                                f"{singularity_note(c, p, float(sol.t[-1]), sol.y[:, -1])}")
         steps += len(sol.t) - 1
         q, u = project(c, p, float(sol.t[-1]), sol.y[:n, -1], sol.y[n:, -1])
+        check_on_manifold(c, p, float(sol.t[-1]), q, u)
         y = np.concatenate([q, u])
         ys.append(y)
         times.append(float(sol.t[-1]))
@@ -461,6 +549,7 @@ def simulate(model: MechanicalModel, t_end: float, dt: float | None = None, meth
     q0, u0, warnings = _start(model, c, p)
     y0 = np.concatenate([q0, u0])
     rhs = RightHandSide(c, p, progress, EVALUATIONS_PER_STEP * max_steps)
+    rhs.horizon = float(t_end)
     chosen = method
     t1 = time.perf_counter()
     nat = native_integrator(model, c, required=method == "native") if method in ("auto", "native") else None
@@ -487,6 +576,9 @@ def simulate(model: MechanicalModel, t_end: float, dt: float | None = None, meth
         for k, (times, states) in enumerate(zip(sol.t_events or [], sol.y_events or [])):
             for t_ev, y_ev in zip(times, states):
                 name, _expr, _direction, action = model.events[k]
+                if any(ev["event"] == name and abs(ev["t"] - t_ev) <= 1e-12 * max(1.0, abs(t_ev))
+                       for ev in recorded[-len(model.events):]):
+                    continue  # a crossing at an output time, seen again at the start of the next interval
                 recorded.append({"t": float(t_ev), "event": name, "action": action,
                                  "state": {**{cn: float(v) for cn, v in zip(model.coordinates, y_ev[:n])},
                                            **{f"der({cn})": float(v) for cn, v in zip(model.coordinates, y_ev[n:])}}})

@@ -59,21 +59,64 @@ def _tspan(t_span: Sequence[float], t_eval: Sequence[float] | None) -> tuple[flo
     return t0, t1, grid
 
 
-def _event_setup(events: Sequence[Callable] | None) -> tuple[Callable | None, list[float], list[int]]:
-    """CVODE events function for scipy-style event callables g(t, y) (with .terminal and .direction)."""
-    if not events:
-        return None, [], []
-    fns = list(events)
+def _interpolant(solver, t1: float) -> Callable:
+    """y(t) inside CVODE's last internal step (its interpolating polynomial), for a scalar t or an array of them."""
+    def interp(t):
+        times = np.atleast_1d(np.asarray(t, dtype=float))
+        out = np.array([np.array(solver.step(float(tk), method="normal", tstop=t1).y, dtype=float)
+                        for tk in times]).T
+        return out[:, 0] if np.ndim(t) == 0 else out
+    return interp
 
-    def eventsfn(t, y, out):
-        for k, g in enumerate(fns):
-            out[k] = g(t, y)
 
-    # terminal handled here (CVODE's step() only records roots): True = 1st occurrence, an int = that many
-    limits = [float(int(getattr(g, "terminal", False))) if getattr(g, "terminal", False) else np.inf for g in fns]
-    eventsfn.direction = [int(np.sign(getattr(g, "direction", 0.0))) for g in fns]
-    eventsfn.terminal = [False] * len(fns)
-    return eventsfn, limits, eventsfn.direction
+def _located_run(solver, t0: float, t1: float, y0: np.ndarray, grid: np.ndarray | None, events: Sequence[Callable],
+                 out: dict) -> tuple[int, int, str, int]:
+    """CVODE one internal step at a time, the events located inside every step on CVODE's interpolant by
+    mechsys.analysis.events (CVODE's own root finder looks at the signs at step ends only and steps over a pair of
+    crossings closer together than a step). Fills out["ts"], ["ys"], ["t_ev"], ["y_ev"]; returns (status, flag,
+    message, steps)."""
+    from mechsys.analysis.events import crossings, event_settings
+
+    limits, directions = event_settings(events)
+    counts = np.zeros(len(events))
+    g = [float(e(t0, y0)) for e in events]
+    targets = None if grid is None else grid[grid > t0]
+    interp = _interpolant(solver, t1)
+    t_prev, first, steps, repeats = t0, True, 0, 0
+    while t_prev < t1:
+        r = solver.step(t1, method="onestep", tstop=t1)
+        out["njev"] = int(r.njev)
+        if int(r.status) < 0:
+            return -1, int(r.status), str(r.message), steps
+        t_cur = float(r.t)
+        if t_cur <= t_prev:  # after interpolated outputs CVODE returns the end of its last step once more
+            repeats += 1
+            if repeats > 2:
+                return -1, -99, f"CVODE made no progress at t = {t_cur:.6g}", steps
+            continue
+        repeats, steps = 0, steps + 1
+        y_cur = np.array(r.y, dtype=float)
+        g, found = crossings(events, directions, interp, t_prev, t_cur, g, y_cur, first)
+        first, t_stop = False, None
+        for t_e, k, _d in found:
+            counts[k] += 1
+            out["t_ev"][k].append(t_e)
+            out["y_ev"][k].append(interp(t_e))
+            if counts[k] >= limits[k]:
+                t_stop = t_e
+                break
+        last = t_cur if t_stop is None else t_stop
+        if grid is None:
+            out["ts"].append(last)
+            out["ys"].append(y_cur if t_stop is None else interp(t_stop))
+        else:
+            for tk in targets[(targets > t_prev) & (targets <= last)]:
+                out["ts"].append(float(tk))
+                out["ys"].append(y_cur if tk == t_cur else interp(float(tk)))
+        if t_stop is not None:
+            return 1, 0, "A termination event occurred.", steps
+        t_prev = t_cur
+    return 0, 0, "The solver successfully reached the end of the integration interval.", steps
 
 
 def integrate(fun: Callable[[float, np.ndarray], np.ndarray], t_span: Sequence[float], y0: np.ndarray,
@@ -115,34 +158,16 @@ def integrate(fun: Callable[[float, np.ndarray], np.ndarray], t_span: Sequence[f
         def jacfn(t, y, yp, JJ):
             JJ[:, :] = jac(t, y)
         options["jacfn"] = jacfn
-    eventsfn, limits, _ = _event_setup(events)
-    if eventsfn is not None:
-        options["eventsfn"] = eventsfn
-        options["num_events"] = len(limits)
+    events = list(events or [])  # located by mechsys (_located_run), not by CVODE's root finder
     solver = CVODE(rhsfn, **options)
 
     ts: list[float] = []
     ys: list[np.ndarray] = []
-    t_ev: list[list[float]] = [[] for _ in limits]
-    y_ev: list[list[np.ndarray]] = [[] for _ in limits]
-    counts = [0] * len(limits)
-    seen_roots = 0
+    t_ev: list[list[float]] = [[] for _ in events]  # per event function, as solve_ivp
+    y_ev: list[list[np.ndarray]] = [[] for _ in events]
     status, flag, message, nsteps = 0, 0, "The solver successfully reached the end of the integration interval.", 0
     printed = io.StringIO()
     stats = {"njev": 0}
-
-    def roots(r) -> bool:
-        """Record the roots CVODE just returned; True when a terminal event has fired."""
-        nonlocal seen_roots
-        stop = False
-        for info in r.i_events[seen_roots:]:
-            for k in np.flatnonzero(info):
-                t_ev[k].append(float(r.t))
-                y_ev[k].append(np.array(r.y, dtype=float))
-                counts[k] += 1
-                stop = stop or counts[k] >= limits[k]
-        seen_roots = len(r.i_events)
-        return stop
 
     try:
         with contextlib.redirect_stdout(printed):  # scikit-sundae print()s SUNDIALS' error lines
@@ -150,9 +175,13 @@ def integrate(fun: Callable[[float, np.ndarray], np.ndarray], t_span: Sequence[f
             if grid is None or (grid.size and grid[0] == t0):
                 ts.append(t0)
                 ys.append(y0.copy())
-            targets = [] if grid is None else [t for t in grid if t > t0]
+            if events:
+                out = {"ts": ts, "ys": ys, "t_ev": t_ev, "y_ev": y_ev, "njev": 0}
+                status, flag, message, nsteps = _located_run(solver, t0, t1, y0, grid, events, out)
+                stats["njev"] = out["njev"]
+            targets = [] if grid is None or events else [t for t in grid if t > t0]
             k = 0
-            while (k < len(targets)) if grid is not None else (not ts or ts[-1] < t1):
+            while not events and ((k < len(targets)) if grid is not None else (not ts or ts[-1] < t1)):
                 if grid is None:
                     r = solver.step(t1, method="onestep", tstop=t1)
                 else:
@@ -162,14 +191,6 @@ def integrate(fun: Callable[[float, np.ndarray], np.ndarray], t_span: Sequence[f
                 if flag < 0:
                     status, message = -1, str(r.message)
                     break
-                if flag == 2:  # CV_ROOT_RETURN: an event before the target; carry on unless terminal
-                    if roots(r):
-                        status, message = 1, "A termination event occurred."
-                        if grid is None:
-                            ts.append(float(r.t))
-                            ys.append(np.array(r.y, dtype=float))
-                        break
-                    continue
                 ts.append(float(r.t))
                 ys.append(np.array(r.y, dtype=float))
                 nsteps += 1
@@ -184,6 +205,6 @@ def integrate(fun: Callable[[float, np.ndarray], np.ndarray], t_span: Sequence[f
         t=np.array(ts), y=y.reshape(len(y0), len(ts)), success=status >= 0, message=message, status=status,
         nfev=state["calls"], njev=stats["njev"],
         nsteps=nsteps if grid is None else None,
-        t_events=[np.array(v) for v in t_ev] if limits else None,
-        y_events=[np.array(v).reshape(len(v), len(y0)) for v in y_ev] if limits else None,
+        t_events=[np.array(v) for v in t_ev] if events else None,
+        y_events=[np.array(v).reshape(len(v), len(y0)) for v in y_ev] if events else None,
         sundials_flag=flag, detail=detail)

@@ -1,0 +1,105 @@
+"""Guards against silent wrong answers in simulate: constraints left behind, and a work budget that bounds wall time."""
+import math
+import os
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+import mechsys
+from mechsys.analysis.simulate import RESIDUAL_TOLERANCE, simulate
+from mechsys.errors import AnalysisError
+from tests.helpers import DATA_DIR, ROOT, SYSTEMS_DIR
+
+OVERDRIVEN = DATA_DIR / "overdriven_slider_crank.yaml"
+
+
+def _pin_speed_mismatch(a=0.2, b=0.5, w=2.0, th0=0.3, t=0.002) -> float:
+    """Closed form of the velocity-level conflict of the two drives at time t (to first order in t): the slider
+    moves at the crank's initial speed v0 while the crank's own slider speed changes at dv/dt = w^2 x''(theta)."""
+    s, c = math.sin(th0), math.cos(th0)
+    root = math.sqrt(b * b - a * a * s * s)
+    # x(theta) = a cos + root: x'' = -a cos - a^2 (c^2 - s^2)/root - a^4 s^2 c^2 / root^3
+    xpp = -a * c - a * a * (c * c - s * s) / root - a ** 4 * s * s * c * c / root ** 3
+    return abs(w * w * xpp) * t
+
+
+@pytest.mark.parametrize("method", ["auto", "DOP853", "Radau"])
+def test_a_run_that_leaves_the_constraints_stops_with_the_residual(method):
+    """Crank and slider of a slider-crank both prescribed, consistent only at t = 0: the projection cannot satisfy
+    the loop closure and both drives; today's runs went on with a residual of 0.2 and exit 0. Now the run stops
+    at the first output with the residual, the time, the tolerance and the reason."""
+    with pytest.raises(AnalysisError) as err:
+        simulate(mechsys.load(OVERDRIVEN), 2.0, method=method)
+    text = str(err.value)
+    assert "the constraint residual reached" in text and "at t = 0.002 s" in text
+    assert "left the constraint manifold" in text and "rank deficient" in text
+    reached = float(text.split("reached ")[1].split(" ")[0])
+    tolerance = float(text.split("(tolerance ")[1].split(")")[0])
+    assert tolerance == pytest.approx(RESIDUAL_TOLERANCE * (1 + 2.0 * 1), rel=0.5)  # 1 + max |q|, |q'| ~ 2
+    # the drives' conflict in pin speed after one output interval, to first order (the residual is a pin-speed row
+    # or a drive row, of the same size)
+    assert 0.3 * _pin_speed_mismatch() < reached < 3 * _pin_speed_mismatch()
+
+
+@pytest.mark.parametrize("method", ["native", "DOP853"])
+def test_an_initial_state_that_cannot_be_assembled_is_an_error(tmp_path, method):
+    """The slider held still while the crank turns: the drives conflict already at t = 0 (velocity level)."""
+    path = tmp_path / "m.yaml"
+    text = OVERDRIVEN.read_text()
+    start = text.index(" - w*a*sin(th0)")
+    path.write_text(text[:start] + "}" + text[text.index("\n", start):])
+    with pytest.raises(AnalysisError, match=r"residual reached .* at t = 0 s .*cannot be assembled"):
+        simulate(mechsys.load(path), 1.0, method=method)
+
+
+def test_cli_reports_the_residual_in_one_line(tmp_path):
+    proc = subprocess.run([sys.executable, "-m", "mechsys", "simulate", str(OVERDRIVEN), "--t-end", "1",
+                           "--method", "DOP853"], capture_output=True, text=True, cwd=ROOT,
+                          env={**os.environ, "MECHSYS_CACHE": str(tmp_path)})
+    assert proc.returncode == 1 and proc.stdout == ""
+    assert "Traceback" not in proc.stderr and len(proc.stderr.strip().splitlines()) == 1
+    assert "constraint residual reached" in proc.stderr and "(tolerance " in proc.stderr
+
+
+@pytest.mark.parametrize("name", ["four_bar", "slider_crank", "rolling_disk", "indicator"])
+def test_healthy_closed_loops_are_not_stopped(name):
+    r = simulate(mechsys.load(SYSTEMS_DIR / f"{name}.yaml"), 0.5)
+    assert np.max(r.residual) < 1e-10
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("method", ["RK45", "LSODA"])
+def test_a_chattering_law_spends_the_budget_in_seconds_on_scipy(method):
+    """sign(der(x)) friction sticks at t = 0.041, where RK45 then chatters with steps at the rounding limit. With the
+    default budget (2e7 RHS evaluations, hours of Python) it used to run on; now the pace check stops it after a
+    window of evaluations that did not advance the time."""
+    model = mechsys.load(DATA_DIR / "native_functions.yaml")
+    start = time.perf_counter()
+    with pytest.raises(AnalysisError, match=r"step budget \(--max-steps\) is spent"):
+        simulate(model, 3.0, method=method)
+    assert time.perf_counter() - start < 30.0
+
+
+@pytest.mark.slow
+def test_a_stiff_scene_on_an_explicit_method_stops_early():
+    """The stiff chain (decay rates to 2.9e4 1/s) on RK45 over 1000 s needs ~6e7 evaluations (stability bound
+    h ~ 3/2.9e4 s, 6 evaluations a step): more than the budget, so the run stops at the first pace check."""
+    start = time.perf_counter()
+    with pytest.raises(AnalysisError, match=r"step budget .* at that pace the remaining"):
+        simulate(mechsys.load(DATA_DIR / "stiff_chain.yaml"), 1000.0, method="RK45")
+    assert time.perf_counter() - start < 30.0
+
+
+@pytest.mark.parametrize("method", ["DOP853", "Radau"])
+def test_a_drive_into_a_locked_configuration_says_so(method):
+    """The crank of a slider-crank with a rod shorter than the crank, driven at w = 1 rad/s from th0 = 0.3 rad,
+    locks at a sin(theta2) = b: t* = asin(b/a) - th0 = 0.627295 s. The failure names the singular Jacobian."""
+    t_lock = math.asin(0.16 / 0.2) - 0.3
+    with pytest.raises(AnalysisError) as err:
+        simulate(mechsys.load(DATA_DIR / "crank_past_its_limit.yaml"), 2.0, method=method)
+    text = str(err.value)
+    assert text.startswith("integration failed at t = ") and "dead-centre or locked configuration" in text
+    assert abs(float(text.split("t = ")[1].split(":")[0]) - t_lock) < 1e-4
