@@ -2,11 +2,14 @@
 from __future__ import annotations
 
 import json
+import math
 import os
 import sys
+import warnings
+from contextlib import contextmanager
 from enum import Enum
 from pathlib import Path
-from typing import Callable, List, Optional
+from typing import Callable, Iterator, List, Optional
 
 import typer
 
@@ -18,6 +21,7 @@ app = typer.Typer(
     add_completion=False,
     pretty_exceptions_enable=False,
     no_args_is_help=True,
+    rich_markup_mode=None,  # plain help: rich markup would eat the units in brackets ("End time [s].")
 )
 
 SetOption = typer.Option(None, "--set", "-s", metavar="NAME=VALUE",
@@ -57,10 +61,108 @@ def emit(text: str, output: Optional[Path]) -> None:
         write_atomic(output, text)
 
 
+def check_outputs(*paths: Optional[Path]) -> None:
+    """Refuse output files that cannot be written (a directory, a device, a missing folder) before any work."""
+    from mechsys.report.files import output_target
+
+    for path in paths:
+        if path is not None:
+            output_target(path)
+
+
+def check_figures(**paths: Optional[Path]) -> None:
+    """Refuse figure files (option name -> path) with a suffix matplotlib cannot write, before any work."""
+    from mechsys.report.files import check_figure_path
+
+    for option, path in paths.items():
+        if path is not None:
+            check_figure_path(path, "--" + option.replace("_", "-"))
+
+
+def write_figure(path: Path, draw: Callable[[str], None], option: str = "--plot") -> None:
+    """Draw a figure through a temporary file of the same suffix: written atomically like every output."""
+    from mechsys.report.files import write_figure as write
+
+    write(path, draw, option)
+
+
+def check_model_file(file: Path) -> None:
+    """One line (exit 2) for a model file that is missing, unreadable, not a regular file (a FIFO would hang
+    the run) or too large, before anything else reads it."""
+    from mechsys.model.load import read_model_text
+
+    read_model_text(file)
+
+
+# ----------------------------------------------------------------------------------------- numeric options
+MAX_POINTS = 10**7  # output grid points of simulate and --frf
+MAX_TASKS = 10**6  # tasks of one sweep
+MAX_SWEEP_POINTS = 1000  # continuation points of --sweep (each branch may take at most 2000 steps)
+MAX_T_END = 1e9  # [s]: beyond, steps fall below the time resolution of double precision
+MIN_RTOL = 100 * sys.float_info.epsilon  # tighter tolerances than ~2e-14 cannot be met in double precision
+MAX_JOBS = 256
+
+
+def _num(x: float) -> str:
+    """A bound as people write it: 1000, 1e+07, 2.22e-14."""
+    return str(int(x)) if x == int(x) and abs(x) < 1e6 else f"{x:.3g}"
+
+
+def check_number(option: str, value: float | None, low: float | None = None, high: float | None = None, *,
+                 open_low: bool = False, open_high: bool = False, whole: bool = False, why: str = "") -> None:
+    """The one rule of every numeric option: a finite number within [low, high] (an open end excludes the bound),
+    a whole number if ``whole``; otherwise an InputError naming the option, the value and the reason."""
+    if value is None:
+        return
+    because = f" ({why})" if why else ""
+    if not math.isfinite(value):
+        raise InputError(f"{option} {value}: must be a finite number")
+    if low is not None and (value <= low if open_low else value < low):
+        bound = "positive" if low == 0 and open_low else f"{'greater than' if open_low else 'at least'} {_num(low)}"
+        raise InputError(f"{option} {value:g}: must be {bound}{because}")
+    if high is not None and (value >= high if open_high else value > high):
+        raise InputError(f"{option} {value:g}: must be {'less than' if open_high else 'at most'} {_num(high)}{because}")
+    if whole and value != int(value):
+        raise InputError(f"{option} {value:g}: must be a whole number")
+
+
+def check_time_grid(t_end: float, dt: Optional[float], option: str = "--t-end", dt_option: str = "--dt") -> None:
+    """A finite positive horizon and, when given, a finite positive output interval whose grid is not huge."""
+    check_number(option, t_end, 0.0, open_low=True)
+    check_number(option, t_end, high=MAX_T_END, why="longer horizons exceed the time resolution of double "
+                                                     "precision")
+    if dt is None:
+        return
+    check_number(dt_option, dt, 0.0, open_low=True)
+    check_number(dt_option, dt, high=t_end, why=f"the horizon {option} is {t_end:g}")
+    points = math.floor(t_end / dt) + 1
+    if points > MAX_POINTS:
+        raise InputError(f"{dt_option} {dt:g}: {points:.3g} output points over {t_end:g} s "
+                         f"(at most {MAX_POINTS:.0e}; use a larger {dt_option})")
+
+
+def check_tolerances(rtol: float, atol: Optional[float] = None, option: str = "--rtol") -> None:
+    """rtol in [100 eps, 1) (what double precision can meet), atol finite and positive."""
+    check_number(option, rtol, MIN_RTOL, why="100 x machine epsilon: tighter cannot be met in double precision")
+    check_number(option, rtol, high=1.0, open_high=True)
+    check_number("--atol", atol, 0.0, open_low=True)
+
+
+@contextmanager
+def quiet_numerics() -> Iterator[None]:
+    """No raw library warnings (numpy's divide-by-zero RuntimeWarnings and the like) on the user's terminal: the
+    analyses report what matters themselves. MECHSYS_DEBUG=1 shows them."""
+    with warnings.catch_warnings():
+        if not os.environ.get("MECHSYS_DEBUG"):
+            warnings.simplefilter("ignore")
+        yield
+
+
 def run(action: Callable[[], int | None]) -> None:
     """Run a command body; report mechsys errors as one line on stderr with their exit code."""
     try:
-        code = action() or 0
+        with quiet_numerics():
+            code = action() or 0
     except MechsysError as exc:
         sys.stderr.write(f"mechsys: {exc}\n" if not isinstance(exc, InputError) or not exc.file else f"{exc}\n")
         raise typer.Exit(exc.exit_code) from None
@@ -99,6 +201,7 @@ def derive(
     def body() -> int:
         from mechsys.report.derive import render, simplified
 
+        check_outputs(output)
         model = load_model(file, set_)
         eq = model.equations(method.value)
         extra: dict = {}
@@ -138,6 +241,7 @@ def info(
         from mechsys.analysis.info import system_info
         from mechsys.report.info import render_json, render_markdown, render_rich
 
+        check_outputs(output)
         result = system_info(load_model(file, set_))
         if fmt == InfoFormat.json:
             emit(render_json(result), output)
@@ -199,8 +303,22 @@ def parse_ranges(items: Optional[List[str]], option: str, count: bool = False) -
         except ValueError:
             form = "NAME=START:STOP:N (N >= 2)" if count else "NAME=LO:HI"
             raise InputError(f"{option} {item!r}: expected {form}") from None
+        check_range(f"{option} {item!r}", values[0], values[1], ordered=not count)
+        if count:
+            check_number(f"{option} {item!r}: N", values[2], high=MAX_SWEEP_POINTS,
+                         why="each branch is followed in at most 2000 continuation steps")
         out[name.strip()] = tuple(values)
     return out
+
+
+def check_range(option: str, lo: float, hi: float, ordered: bool = True, ends: str = "LO HI") -> None:
+    """Finite ends; with ``ordered``, LO < HI (a search box, a frequency range)."""
+    for value in (lo, hi):
+        if not math.isfinite(value):
+            raise InputError(f"{option}: {value} is not a finite number")
+    if ordered and not lo < hi:
+        first, second = ends.split()
+        raise InputError(f"{option}: {first} must be less than {second}")
 
 
 @app.command()
@@ -230,6 +348,8 @@ def equilibria(
         sweep_spec = parse_ranges([sweep_], "--sweep", count=True) if sweep_ else {}
         if plot is not None and not sweep_spec:
             raise InputError("--plot needs --sweep")
+        check_figures(plot=plot)
+        check_outputs(output)
         model = load_model(file, set_)
         result = find_equilibria(model, boxes)
         tables = rep.equilibria_tables(result)
@@ -242,7 +362,7 @@ def equilibria(
             bifurcations = swept.bifurcations
             tables += rep.sweep_tables(swept)
             if plot is not None:
-                plot_sweep(swept, str(plot), plot_coordinate)
+                write_figure(plot, lambda tmp: plot_sweep(swept, tmp, plot_coordinate))
         if linearize_ or hurwitz:
             from mechsys.analysis.linearize import linearize, symbolic_matrices
 
@@ -298,6 +418,7 @@ def modes(
                 raise InputError(f"--at {item!r}: expected NAME=VALUE with a number") from None
             if not sep:
                 raise InputError(f"--at {item!r}: expected NAME=VALUE")
+            check_number(f"--at {name.strip()}:", point[name.strip()])
         frf_range = None
         if frf:
             parts = frf.split(":")
@@ -307,6 +428,11 @@ def modes(
                     raise ValueError
             except (ValueError, IndexError):
                 raise InputError(f"--frf {frf!r}: expected START:STOP:N (N >= 2)") from None
+            check_range(f"--frf {frf!r}", frf_range[0], frf_range[1], ends="START STOP")
+            check_number(f"--frf {frf!r}: START", frf_range[0], 0.0, why="frequencies in rad/s")
+            check_number(f"--frf {frf!r}: N", frf_range[2], high=MAX_POINTS)
+        check_figures(plot=plot)
+        check_outputs(output)
         model = load_model(file, set_)
         result = modal.vibration_modes(model, point or None)
         tables = rep.modes_tables(result)
@@ -325,9 +451,9 @@ def modes(
             payload["frf"] = {"input": inp, "response": out, "omega": omegas.tolist(),
                               "magnitude": np.abs(H).tolist(), "phase": np.angle(H).tolist()}
             if plot is not None:
-                modal.plot_frf(omegas, H, str(plot), f"{out}/{inp}")
+                write_figure(plot, lambda tmp: modal.plot_frf(omegas, H, tmp, f"{out}/{inp}"))
         elif plot is not None:
-            modal.plot_modes(result, str(plot))
+            write_figure(plot, lambda tmp: modal.plot_modes(result, tmp))
         if state_space or transfer:
             A, B, C, D = result.system.state_space()
             states = result.system.names + [f"der({c})" for c in result.system.names]
@@ -383,12 +509,19 @@ def simulate(
     def body() -> int:
         from mechsys.report.simulation import check_result_path, plot_histories, summary_table, write_result
 
+        check_time_grid(t_end, dt)
+        check_tolerances(rtol, atol)
+        check_number("--max-steps", max_steps, 1.0)
+        check_number("--capture-velocity", capture, 0.0)
         if output is not None:
             check_result_path(output)  # reject a bad suffix (or Parquet without pyarrow) first
         if animate is not None:
             from mechsys.report.animation import check_animation_path, write_animation
 
             check_animation_path(animate, fps)
+        check_figures(plot=plot)
+        check_outputs(output, animate, events_file, impacts_file)
+        check_model_file(file)  # before the warm path reads it: a FIFO would hang, a device never end
         from mechsys.analysis.warm import simulate_file
         from mechsys.report.progress import ProgressBar
 
@@ -408,7 +541,7 @@ def simulate(
         if output is not None:
             write_result(output, names, data)
         if plot is not None:
-            plot_histories(*result.columns(), str(plot))
+            plot_histories(*result.columns(), str(plot))  # atomically, through report/files.py
         if impacts_file is not None:
             from mechsys.report.simulation import impacts_text
 
@@ -450,6 +583,13 @@ def bench(
             tols = [float(x) for x in rtols.split(",") if x.strip()]
         except ValueError:
             raise InputError(f"--rtols {rtols!r}: expected comma-separated numbers") from None
+        if not chosen or not tols:
+            raise InputError("--methods and --rtols need at least one entry each")
+        check_time_grid(t_end, None)
+        for tol in tols:
+            check_tolerances(tol, option="--rtols")
+        check_figures(plot=plot)
+        check_outputs(output)
         points, ref_seconds = work_precision(load_model(file, set_), t_end, chosen, tols)
         t = Table("work-precision (reference: DOP853, rtol 1e-13)",
                   ["method", "rtol", "wall time [s]", "RHS evaluations", "final error", "energy drift",
@@ -458,7 +598,7 @@ def bench(
             t.add(p.method, p.rtol, p.seconds, p.rhs_evaluations, p.final_error, p.energy_drift, p.residual, p.failed)
         t.notes.append(f"reference run: {ref_seconds:.3g} s")
         if plot is not None:
-            plot_work_precision(points, str(plot))
+            write_figure(plot, lambda tmp: plot_work_precision(points, tmp))
         emit_tables([t], fmt, output)
         return 0
 
@@ -474,15 +614,16 @@ def plot_result(
     (a stability map)."""
 
     def body() -> int:
-        from mechsys.report.simulation import plot_histories, plot_sweep_table, read_result
+        from mechsys.report.simulation import is_sweep_table, plot_histories, plot_sweep_table, read_result
 
-        if result.suffix == ".csv" and result.exists():
-            header = result.read_text(encoding="utf-8").split("\n", 1)[0].split(",")
-            if "status" in header:  # a sweep table: the stability map
-                plot_sweep_table(result, str(output))
-                return 0
+        check_figures(output=output)
+        if is_sweep_table(result):  # a sweep table: the stability map
+            plot_sweep_table(result, str(output))
+            return 0
         names, data = read_result(result)
-        plot_histories(names, data, str(output))
+        if "t" not in names:
+            raise InputError(f"{result}: not a simulation result (no 't' column)")
+        plot_histories(names, data, str(output), "--output")
         return 0
 
     run(body)
@@ -500,6 +641,7 @@ def export_result(
         from mechsys.report.simulation import check_result_path, read_result, write_result
 
         check_result_path(output)
+        check_outputs(output)
         names, data = read_result(result)
         write_result(output, names, data)
         return 0
@@ -525,6 +667,7 @@ def collide(
         from mechsys.model.load import parse_assignments
         from mechsys.report.tables import Table
 
+        check_outputs(output)
         model = mechsys.load(file, parse_assignments(set_), release_prescribed=True)
         if percussion:
             cp = centre_of_percussion(model, link)
@@ -577,6 +720,11 @@ def check(
         from mechsys.analysis.check import junit_xml, run_checks
         from mechsys.report.tables import Table, render_tables
 
+        check_number("--jobs", jobs, 1, MAX_JOBS)
+        check_outputs(junit, markdown)
+        for path in paths:
+            if path.exists() and not path.is_dir():
+                check_model_file(path)
         results = run_checks([str(p) for p in paths], jobs)
         table = Table("checks", ["file", "check", "status", "measured", "expected", "message"])
         for r in results:
@@ -595,6 +743,38 @@ def check(
         return 0 if failed == 0 and errors == 0 else 1
 
     run(body)
+
+
+def check_task_count(axes: list, sampling: Optional[tuple[str, int]]) -> None:
+    """At most MAX_TASKS tasks: the grid's product of point counts, or the --sample size."""
+    if sampling is not None:
+        check_number(f"--sample {sampling[0]}:N", sampling[1], high=MAX_TASKS, why="tasks of one sweep")
+        return
+    count = math.prod(a.n for a in axes)
+    if count > MAX_TASKS:
+        sizes = " x ".join(str(a.n) for a in axes)
+        raise InputError(f"--param: {sizes} = {count} tasks (at most {MAX_TASKS} in one sweep)")
+
+
+def _option_number(options: dict, key: str) -> Optional[float]:
+    value = options.get(key)
+    if isinstance(value, str):
+        raise InputError(f"--option {key}={value}: expected a number")
+    return value
+
+
+def check_sweep_options(options: dict) -> None:
+    """The numeric --option values of a sweep follow the rules of the matching command options."""
+    t_end, dt = _option_number(options, "t_end"), _option_number(options, "dt")
+    horizon = 10.0 if t_end is None else t_end  # the simulate task's default horizon (analysis/tasks.py)
+    check_time_grid(horizon, dt, "--option t_end", "--option dt")
+    for key in ("start", "stop"):
+        check_number(f"--option {key}", _option_number(options, key))
+    check_number("--option points", _option_number(options, "points"), 2, MAX_SWEEP_POINTS, whole=True)
+    for name, (lo, hi) in options.get("search", {}).items():
+        check_range(f"--option search.{name}", lo, hi)
+    for name, value in options.get("at", {}).items():
+        check_number(f"--option at.{name}", value)
 
 
 @app.command()
@@ -647,20 +827,24 @@ def sweep(
             raise InputError(f"--executor {executor!r}: choose from {', '.join(sw.EXECUTORS)}")
         if scheduler and executor != "dask":
             raise InputError("--scheduler needs --executor dask")
-        if jobs is not None and jobs < 1:
-            raise InputError(f"--jobs {jobs}: must be at least 1")
+        check_number("--jobs", jobs, 1, MAX_JOBS)
+        check_number("--seed", seed, 0)
         sampling = sw.parse_sample(sample)
         axes = sw.parse_params(param, sampled=sampling is not None)
+        check_task_count(axes, sampling)
         options = sw.parse_options(option, analysis)
+        check_sweep_options(options)
         sw.check_output(output)
+        check_outputs(output)
         sets = parse_assignments(set_)
         model = mechsys.load(file, sets, release_prescribed=analysis == "simulate")
         sw.check_names(model, axes)
         names = [a.name for a in axes]
         tasks = sw.make_tasks(axes, sampling, seed)
         resume = sw.load_resume(output, names, model)
-        spec = sw.SweepSpec(str(file.resolve()), file.read_text(encoding="utf-8"), tuple(sets.items()), analysis,
-                            options)
+        from mechsys.model.load import read_model_text
+
+        spec = sw.SweepSpec(str(file.resolve()), read_model_text(file), tuple(sets.items()), analysis, options)
 
         from rich.console import Console
         from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn,
@@ -712,13 +896,19 @@ def schema(output: Optional[Path] = OutputOption) -> None:
     run(body)
 
 
-@app.callback()
-def _root(version: bool = typer.Option(False, "--version", help="Print the version and exit.")) -> None:
-    if version:
+def _print_version(value: bool) -> None:
+    """--version is eager: it answers before click asks for a command ("Missing command")."""
+    if value:
         from mechsys import __version__
 
         typer.echo(f"mechsys {__version__}")
         raise typer.Exit(0)
+
+
+@app.callback()
+def _root(version: bool = typer.Option(False, "--version", callback=_print_version, is_eager=True,
+                                       help="Print the version and exit.")) -> None:
+    """Dynamics of mechanical systems from one validated YAML model."""
 
 
 def main() -> None:

@@ -4,6 +4,7 @@ from __future__ import annotations
 import difflib
 import os
 import re
+import stat
 from dataclasses import dataclass, field
 from typing import Any, Mapping
 
@@ -50,7 +51,7 @@ class Document:
     # ------------------------------------------------------------------------------------- errors
     def error(self, path: Path, message: str, key: bool = False) -> InputError:
         if tuple(path) in self.overridden:
-            return InputError(f"--set {self.overridden[tuple(path)]}: {message}")
+            return InputError(f"--set {_shorten(self.overridden[tuple(path)])}: {message}")
         line, col = self.positions.lookup(path, key=key)
         return InputError(message, self.file, line, col, dotted(path))
 
@@ -58,7 +59,10 @@ class Document:
     def parse(self, value: Any, path: Path, kind: str = "kinematic", extra: dict | None = None) -> sp.Expr:
         """Parse an expression at ``path``. ``kind``: 'parameter' (parameters only), 'initial' (parameters),
         'prescribed' (parameters and t), 'kinematic' (+ coordinates), 'force' (+ rates)."""
-        symbols: dict[str, sp.Expr] = dict(self.parameters)
+        # parameters only: the mapping itself (no copy per call, which made N parameters cost N**2)
+        symbols: Mapping[str, sp.Expr] = self.parameters
+        if kind in ("prescribed", "kinematic", "force") or extra:
+            symbols = dict(self.parameters)
         rates = None
         if kind in ("prescribed", "kinematic", "force"):
             symbols["t"] = T
@@ -68,12 +72,13 @@ class Document:
         if kind == "force":
             rates = dict(self.rates)
             rates.update({n: sp.diff(e, T) for n, e in self.prescribed.items()})
-        symbols.update(extra or {})
+        if extra:
+            symbols.update(extra)  # a copy: see above
         try:
             return parse_expression(value, symbols, rates)
         except ExpressionError as exc:
             if path in self.overridden:
-                raise InputError(f"--set {self.overridden[path]}: {exc.message}") from None
+                raise InputError(f"--set {_shorten(self.overridden[path])}: {exc.message}") from None
             line, col = self.positions.lookup(path)
             if isinstance(value, str):
                 col += _offset_in_scalar(self.raw_text_line(line), value, exc.column)
@@ -95,6 +100,11 @@ class Document:
 
     def numeric_parameters(self) -> dict[sp.Symbol, float]:
         return {self.parameters[k]: v for k, v in self.parameter_values.items()}
+
+
+def _shorten(text: str, limit: int = 80) -> str:
+    """A --set item as echoed in a message: at most ``limit`` characters (an expression may have 4000)."""
+    return text if len(text) <= limit else text[:limit - 3] + "..."
 
 
 def _offset_in_scalar(line_text: str, value: str, column: int) -> int:
@@ -328,23 +338,55 @@ def _hint(name: str, options: list[str]) -> str:
 
 
 # ----------------------------------------------------------------------------------------- entry point
+MAX_MODEL_BYTES = 10 * 1024 * 1024  # model files are text of a few kB; a larger "model" is a mistake
+
+
+def _open_model(file: str) -> int:
+    """A read-only descriptor of a regular file; never blocks (a FIFO is opened non-blocking, then refused)."""
+    try:
+        fd = os.open(file, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
+    except FileNotFoundError:
+        raise InputError(f"{file}: no such file") from None
+    except IsADirectoryError:
+        raise InputError(f"{file}: is a directory, expected a model file") from None
+    except OSError as exc:
+        raise InputError(f"{file}: cannot read: {(exc.strerror or str(exc)).lower()}") from None
+    info = os.fstat(fd)
+    problem = ("is a directory, expected a model file" if stat.S_ISDIR(info.st_mode) else
+               "cannot read: not a regular file (a device, FIFO or socket)" if not stat.S_ISREG(info.st_mode) else
+               f"cannot read: larger than {MAX_MODEL_BYTES // 2**20} MB (the limit of a model file)"
+               if info.st_size > MAX_MODEL_BYTES else None)
+    if problem:
+        os.close(fd)
+        raise InputError(f"{file}: {problem}")
+    return fd
+
+
+def read_model_text(path: str | os.PathLike) -> str:
+    """The text of a model file (UTF-8, at most MAX_MODEL_BYTES), or a one-line InputError: missing, a directory,
+    not a regular file (FIFO, device), too large, unreadable, not UTF-8."""
+    file = os.fspath(path)
+    fd = _open_model(file)
+    try:
+        with os.fdopen(fd, encoding="utf-8") as fh:
+            text = fh.read(MAX_MODEL_BYTES + 1)
+    except UnicodeDecodeError:
+        raise InputError("the file is not UTF-8 text", file, 1, 1) from None
+    except OSError as exc:
+        raise InputError(f"{file}: cannot read: {(exc.strerror or str(exc)).lower()}") from None
+    if len(text) > MAX_MODEL_BYTES:
+        raise InputError(f"{file}: cannot read: larger than {MAX_MODEL_BYTES // 2**20} MB (the limit of a model "
+                         "file)")
+    return text
+
+
 def read_document(path: str | os.PathLike, overrides: Mapping[str, Any] | None = None,
                   release_prescribed: bool = False) -> Document:
     """Read and validate a model file, resolve parameters and coordinates; raise InputError on bad input.
     ``release_prescribed`` turns each prescribed coordinate into a free one held by q - p(t) = 0 (its
     multiplier is then the driving force: inverse dynamics)."""
     file = os.fspath(path)
-    try:
-        with open(file, encoding="utf-8") as fh:
-            text = fh.read()
-    except FileNotFoundError:
-        raise InputError(f"{file}: no such file") from None
-    except IsADirectoryError:
-        raise InputError(f"{file}: is a directory, expected a model file") from None
-    except UnicodeDecodeError:
-        raise InputError("the file is not UTF-8 text", file, 1, 1) from None
-    except OSError as exc:
-        raise InputError(f"{file}: cannot read ({exc.strerror})") from None
+    text = read_model_text(file)
     data, pos = load_yaml(text, file)
     if not isinstance(data, dict):
         raise InputError("a model file must be a mapping with keys such as 'name' and 'links'", file, 1, 1)
@@ -401,7 +443,9 @@ def _resolve_symbols(doc: Document, release_prescribed: bool = False) -> None:
 def _numeric(doc: Document, value: Any, path: Path) -> float:
     expr = doc.parse(value, path, "initial")
     try:
-        out = complex(expr.subs(doc.numeric_parameters()).evalf())
+        used = expr.free_symbols
+        values = {doc.parameters[n]: sp.Float(v) for n, v in doc.parameter_values.items() if doc.parameters[n] in used}
+        out = complex(sp.sympify(expr.xreplace(values)).evalf())
     except (TypeError, ValueError):
         raise doc.error(path, "does not evaluate to a number") from None
     if abs(out.imag) > 1e-12 * max(1.0, abs(out.real)) or out.real != out.real or abs(out.real) == float("inf"):
@@ -410,34 +454,44 @@ def _numeric(doc: Document, value: Any, path: Path) -> float:
 
 
 def _resolve_parameters(doc: Document) -> None:
+    """Sort the parameters so each comes after the ones it uses (a cycle is an error: ``a -> b -> a``), parse
+    them and evaluate them to floats. Linear in the number of parameters: an iterative depth-first search (no
+    recursion limit on long chains) and each expression evaluated with the numeric values of its own
+    dependencies only (sympy Floats, never Python floats: ``m1: m2`` is the Float of m2, not a float)."""
     spec = doc.spec
-    deps = {n: names_in(v) & set(spec.parameters) for n, v in spec.parameters.items()}
+    known = set(spec.parameters)
+    deps = {n: sorted(names_in(v) & known) for n, v in spec.parameters.items()}
     order: list[str] = []
-    state: dict[str, int] = {}
-
-    def visit(n: str, chain: list[str]) -> None:
-        if state.get(n) == 2:
-            return
-        if state.get(n) == 1:
-            cycle = chain[chain.index(n):] + [n]
-            raise doc.error(("parameters", n), f"parameters form a cycle: {' -> '.join(cycle)}")
-        state[n] = 1
-        for d in sorted(deps[n]):
-            visit(d, chain + [n])
-        state[n] = 2
-        order.append(n)
-
-    for n in spec.parameters:
-        visit(n, [])
-    values: dict[sp.Symbol, float] = {}
+    state: dict[str, int] = {}  # 1: on the current path, 2: done
+    for root in spec.parameters:
+        if root in state:
+            continue
+        state[root] = 1
+        path = [root]
+        stack = [iter(deps[root])]
+        while stack:
+            d = next(stack[-1], None)
+            if d is None:
+                stack.pop()
+                done = path.pop()
+                state[done] = 2
+                order.append(done)
+            elif state.get(d) == 1:
+                cycle = path[path.index(d):] + [d]
+                raise doc.error(("parameters", d), f"parameters form a cycle: {' -> '.join(cycle)}")
+            elif d not in state:
+                state[d] = 1
+                path.append(d)
+                stack.append(iter(deps[d]))
+    values: dict[str, sp.Float] = {}
     for n in order:
         expr = doc.parse(spec.parameters[n], ("parameters", n), "parameter")
         doc.parameter_exprs[n] = expr
         try:
-            val = complex(expr.subs(values).evalf())
+            val = complex(sp.sympify(expr.xreplace({doc.parameters[d]: values[d] for d in deps[n]})).evalf())
         except (TypeError, ValueError):
             raise doc.error(("parameters", n), "does not evaluate to a number") from None
         if abs(val.imag) > 1e-12 * max(1.0, abs(val.real)) or val.real != val.real or abs(val.real) == float("inf"):
             raise doc.error(("parameters", n), "does not evaluate to a finite real number")
-        values[doc.parameters[n]] = val.real
+        values[n] = sp.Float(val.real)
         doc.parameter_values[n] = val.real

@@ -73,9 +73,36 @@ def plot_sweep_table(path: Path, out: str) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    rows = list(csv.DictReader(Path(path).open(encoding="utf-8")))
+    from mechsys.report.files import write_figure
+
+    rows = list(csv.DictReader(read_text_file(Path(path), "a sweep table").splitlines()))
     if not rows or "status" not in rows[0]:
         raise InputError(f"{path}: neither a simulation result nor a sweep table")
+    try:
+        fig = _sweep_figure(rows, path)
+        write_figure(out, fig.savefig, "--output")
+    finally:
+        plt.close("all")
+
+
+def is_sweep_table(path: Path) -> bool:
+    """A CSV whose header row has a 'status' column: a `mechsys sweep` table (plotted as a stability map)."""
+    if Path(path).suffix.lower() != ".csv" or not Path(path).is_file():
+        return False
+    header = read_text_file(Path(path)).split("\n", 1)[0]
+    return "status" in [c.strip() for c in header.split(",")]
+
+
+def _number(cell: str | None, path: Path, column: str) -> float:
+    try:
+        return float(cell)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        raise InputError(f"{path}: column {column!r}: {cell!r} is not a number") from None
+
+
+def _sweep_figure(rows: list[dict], path: Path):
+    import matplotlib.pyplot as plt
+
     cols = list(rows[0])
     x_name = cols[1] if cols[0] in ("task", "id") else cols[0]
     coords = sorted({c.split(".", 1)[1] for c in cols if c.startswith("eq") and "." in c
@@ -86,10 +113,10 @@ def plot_sweep_table(path: Path, out: str) -> None:
     for r in rows:
         if r.get("status") != "ok":
             continue
-        x = float(r[x_name])
+        x = _number(r[x_name], path, x_name)
         k = 1
         while f"eq{k}.{coords[0]}" in r and r[f"eq{k}.{coords[0]}"] not in ("", None):
-            y = float(r[f"eq{k}.{coords[0]}"])
+            y = _number(r[f"eq{k}.{coords[0]}"], path, f"eq{k}.{coords[0]}")
             stable = r.get(f"eq{k}.stability") in ("stable", "asymptotically stable")
             ax.plot([x], [y], "o", ms=4, color="C0" if stable else "C3", mfc="C0" if stable else "none")
             k += 1
@@ -98,34 +125,88 @@ def plot_sweep_table(path: Path, out: str) -> None:
     ax.set_title("equilibria (filled: stable, hollow: unstable)")
     ax.grid(True, alpha=0.3)
     fig.tight_layout()
-    fig.savefig(out)
-    plt.close(fig)
+    return fig
+
+
+def read_text_file(path: Path, what: str = "a mechsys result file") -> str:
+    """A result or table file's text, or a one-line input error: missing, unreadable, not a regular file, not
+    UTF-8 (a binary or foreign-encoded file)."""
+    path = Path(path)
+    if path.exists() and not path.is_file():
+        raise InputError(f"{path}: cannot read: not a regular file (expected {what})")
+    try:
+        return path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as exc:
+        raise InputError(f"{path}: not {what}: not UTF-8 text (byte {exc.start})") from None
+    except OSError as exc:
+        raise InputError(f"{path}: cannot read ({exc.strerror or exc})") from None
+
+
+def _check_names(names: object) -> list[str]:
+    """Distinct, non-empty column names, or ValueError."""
+    if not isinstance(names, list) or not names or not all(isinstance(n, str) and n for n in names):
+        raise ValueError("the columns must be a list of names")
+    if len(set(names)) != len(names):
+        raise ValueError(f"repeated column {next(n for n in names if names.count(n) > 1)!r}")
+    return names
+
+
+def _checked(names: object, data: object) -> tuple[list[str], np.ndarray]:
+    """Column names (distinct strings) and a numeric table with one column per name, or ValueError."""
+    names = _check_names(names)
+    if not isinstance(data, list) or not all(isinstance(row, list) for row in data):
+        raise ValueError("the data must be a list of rows")
+    if not data:
+        raise ValueError("no rows")
+    if any(len(row) != len(names) for row in data):
+        raise ValueError(f"a row does not have {len(names)} values")
+    if any(isinstance(x, bool) or not isinstance(x, (int, float)) for row in data for x in row):
+        raise ValueError("a value is not a number")
+    return names, np.array(data, dtype=float).reshape(len(data), len(names))
+
+
+def _parse_csv(text: str) -> tuple[list, list]:
+    lines = [ln for ln in text.splitlines() if ln.strip()]
+    if not lines:
+        raise ValueError("the file is empty")
+    names = [n.strip() for n in lines[0].split(",")]
+    rows = []
+    for k, ln in enumerate(lines[1:], start=2):
+        try:
+            rows.append([float(x) for x in ln.split(",")])
+        except ValueError:
+            raise ValueError(f"line {k} is not a row of numbers") from None
+    return names, rows
+
+
+def _parse_json(text: str) -> tuple[object, object]:
+    obj = json.loads(text)
+    if not isinstance(obj, dict) or "columns" not in obj or "data" not in obj:
+        raise ValueError("expected an object with 'columns' and 'data'")
+    return obj["columns"], obj["data"]
 
 
 def read_result(path: Path) -> tuple[list[str], np.ndarray]:
-    """Read a result file written by `mechsys simulate` (CSV, JSON or Parquet)."""
+    """Read a result file written by `mechsys simulate` (CSV, JSON or Parquet); anything else (empty, truncated,
+    not UTF-8, ragged rows, repeated columns) is a one-line InputError naming the file."""
     if Path(path).suffix.lower() == ".parquet":
         return _read_parquet(Path(path))
+    text = read_text_file(Path(path))
+    is_json = Path(path).suffix.lower() == ".json"
     try:
-        text = Path(path).read_text(encoding="utf-8")
-    except OSError as exc:
-        raise InputError(f"{path}: cannot read ({exc.strerror})") from None
-    try:
-        if Path(path).suffix == ".json":
-            obj = json.loads(text)
-            return list(obj["columns"]), np.array(obj["data"], dtype=float)
-        lines = [ln for ln in text.splitlines() if ln.strip()]
-        names = lines[0].split(",")
-        data = np.array([[float(x) for x in ln.split(",")] for ln in lines[1:]], dtype=float)
-        if data.ndim != 2 or data.shape[1] != len(names):
-            raise ValueError
-        return names, data
-    except (ValueError, KeyError, IndexError, json.JSONDecodeError):
-        raise InputError(f"{path}: not a mechsys result file (CSV with a header row, or JSON)") from None
+        names, data = _parse_json(text) if is_json else _parse_csv(text)
+        return _checked(names, data)
+    except (ValueError, RecursionError) as exc:  # json.JSONDecodeError is a ValueError
+        kind = "JSON with 'columns' and 'data'" if is_json else "CSV with a header row"
+        detail = (f": invalid JSON at line {exc.lineno}, column {exc.colno} ({exc.msg})"
+                  if isinstance(exc, json.JSONDecodeError) else f": {exc}")
+        raise InputError(f"{path}: not a mechsys result file ({kind}){detail}") from None
 
 
 def _read_parquet(path: Path) -> tuple[list[str], np.ndarray]:
     pa, pq = _pyarrow(path, "reading")
+    if path.exists() and not path.is_file():
+        raise InputError(f"{path}: cannot read: not a regular file (expected a mechsys result file)")
     if not path.is_file():
         raise InputError(f"{path}: cannot read (No such file or directory)")
     try:
@@ -134,8 +215,12 @@ def _read_parquet(path: Path) -> tuple[list[str], np.ndarray]:
         columns = [np.asarray(table.column(k).to_numpy(), dtype=float) for k in range(table.num_columns)]
     except (OSError, ValueError, TypeError, pa.ArrowException):
         raise InputError(f"{path}: not a mechsys result file (Parquet with numeric columns)") from None
-    if not names:
-        raise InputError(f"{path}: not a mechsys result file (the Parquet table has no columns)")
+    try:
+        _check_names(names)
+        if not table.num_rows:
+            raise ValueError("no rows")
+    except ValueError as exc:
+        raise InputError(f"{path}: not a mechsys result file (Parquet with numeric columns): {exc}") from None
     return names, np.column_stack(columns) if columns[0].size else np.zeros((0, len(names)))
 
 
@@ -163,12 +248,14 @@ def summary_table(result) -> list[Table]:
     return [t]
 
 
-def plot_histories(names: list[str], data: np.ndarray, path: str) -> None:
-    """Coordinates, rates, energy and a phase portrait of the first coordinate."""
+def plot_histories(names: list[str], data: np.ndarray, path: str, option: str = "--plot") -> None:
+    """Coordinates, rates, energy and a phase portrait of the first coordinate, written atomically."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+
+    from mechsys.report.files import write_figure
 
     if "t" not in names:
         raise InputError("the result has no 't' column")
@@ -199,8 +286,10 @@ def plot_histories(names: list[str], data: np.ndarray, path: str) -> None:
         if ax.lines:
             ax.legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)
+    try:
+        write_figure(path, fig.savefig, option)
+    finally:
+        plt.close(fig)
 
 
 def events_text(events: list[dict], coordinates: list[str], suffix: str) -> str:
