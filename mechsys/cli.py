@@ -912,7 +912,24 @@ def _root(version: bool = typer.Option(False, "--version", callback=_print_versi
 
 
 def main() -> None:
-    app()
+    """Entry point: like ``app()``, but a usage error (bad option value, missing argument, unknown command or
+    option) is one line on stderr with exit 2, as every other invalid input."""
+    try:
+        code = app(standalone_mode=False)
+    except typer.Abort:
+        sys.stderr.write("mechsys: interrupted\n")
+        code = 130
+    except Exception as exc:  # click's ClickException family (vendored by recent typer releases): duck-typed
+        if not (hasattr(exc, "format_message") and hasattr(exc, "exit_code")):
+            raise
+        if type(exc).__name__ == "NoArgsIsHelpError":
+            exc.show()  # `mechsys` or `mechsys COMMAND` alone: the help text
+        else:
+            ctx = getattr(exc, "ctx", None)
+            where = f" (see '{ctx.command_path} --help')" if ctx is not None else ""
+            sys.stderr.write(f"mechsys: {exc.format_message()}{where}\n")
+        code = exc.exit_code
+    sys.exit(code if isinstance(code, int) else 0)
 
 
 if __name__ == "__main__":

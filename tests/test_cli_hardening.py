@@ -299,6 +299,29 @@ def test_plot_of_a_table_without_time_names_the_file(tmp_path):
         f"mechsys: {path}: not a simulation result (no 't' column)"
 
 
+# ----------------------------------------------------------------------------------------- usage errors
+@pytest.mark.parametrize("args, message", [
+    (["simulate", PENDULUM, "--t-end", "abc"], "Invalid value for '--t-end'"),
+    (["simulate"], "Missing argument"),
+    (["simulatee", PENDULUM], "No such command 'simulatee'. Did you mean 'simulate'?"),
+    (["info", PENDULUM, "--bogus"], "No such option: --bogus"),
+    (["info", PENDULUM, "-f", "yaml"], "Invalid value for '--format'"),
+])
+def test_usage_errors_are_one_line_with_exit_2(args, message, tmp_path):
+    """click/typer print usage errors as a usage block (or a box); the mechsys entry point says them in one line
+    like every other invalid input."""
+    proc = run_cli(args, tmp_path)
+    assert proc.returncode == 2, proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("mechsys: ") and message in lines[0], proc.stderr
+    assert "--help" in lines[0]
+
+
+def test_no_command_still_shows_the_help(tmp_path):
+    proc = run_cli([], tmp_path)
+    assert "Usage: " in proc.stdout + proc.stderr and "simulate" in proc.stdout + proc.stderr
+
+
 # ----------------------------------------------------------------------------------------- 5-7
 def test_version_prints_the_version_and_exits_0():
     import mechsys
