@@ -207,3 +207,40 @@ def test_start_not_converging_raises():
         continue_branch(F, Fx, Fp, np.array([1.0]), 0.0, -1.0, 1.0, eig)
     with pytest.raises(ValueError, match="outside"):
         continue_branch(*fold_problem()[:3], np.array([1.0]), -1.0, 0.0, 1.0, fold_problem()[3])
+
+
+def test_a_branch_cut_by_the_step_limit_says_so():
+    """A branch that runs out of steps inside the range used to end silently; sweeps then traced its untraced
+    part again from another start and reported one branch as several (equilibria --sweep with 3000 points gave 8
+    branches of the double pendulum instead of 4)."""
+    line = (lambda x, p: np.array([x[0] - p]), lambda x, p: np.eye(1), lambda x, p: np.array([-1.0]))
+    eig = lambda x, p: np.array([-1.0 + 0j])  # noqa: E731
+    short = continue_branch(*line, [0.0], 0.0, 0.0, 10.0, eig, ds=0.01, ds_max=0.01, max_steps=50)
+    assert short.truncated and short.points[-1].p < 1.0
+    full = continue_branch(*line, [0.0], 0.0, 0.0, 10.0, eig, ds=0.01, ds_max=0.05, max_steps=2000)
+    assert not full.truncated and full.points[-1].p == 10.0
+    merged = sweep_parameter(*line, [(np.array([5.0]), 5.0)], 0.0, 10.0, eig, ds=0.01, ds_max=0.01, max_steps=50)
+    assert len(merged) == 1 and merged[0].truncated
+
+
+def test_equilibria_sweep_step_limit_follows_the_points(monkeypatch):
+    """bifurcation.sweep asks for enough steps to cross the range at the requested resolution, and reports a
+    truncated branch in the notes of its table."""
+    import mechsys
+    from mechsys.analysis import bifurcation
+    from mechsys.report.equilibria import sweep_tables
+
+    seen = {}
+    real = bifurcation.sweep_parameter
+
+    def spy(*args, **kw):
+        seen.update(kw)
+        return real(*args, **{**kw, "max_steps": 5})
+
+    monkeypatch.setattr(bifurcation, "sweep_parameter", spy)
+    from tests.helpers import SYSTEMS_DIR
+
+    result = bifurcation.sweep(mechsys.load(SYSTEMS_DIR / "double_pendulum.yaml"), "m1", 1.0, 2.0, 300)
+    assert seen["max_steps"] >= 20 * 300
+    assert result.notes and "step limit" in result.notes[0]
+    assert any("incomplete" in note for table in sweep_tables(result) for note in table.notes)

@@ -20,6 +20,7 @@ class SweepResult:
     angles: list[bool]
     branches: list[Branch]
     bifurcations: list[dict] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
 
     def rows(self) -> list[list]:
         """(branch, parameter value, coordinates..., stable) for every continuation point."""
@@ -84,12 +85,18 @@ def sweep(model: MechanicalModel, name: str, start: float, stop: float, points: 
             starts.append((z, float(p)))
     span = hi - lo if hi > lo else 1.0
     step = span / max(points - 1, 1)
+    # the step limit grows with the points asked for (a branch needs at least points - 1 steps to cross the range)
     branches = sweep_parameter(F, Fx, Fp, starts, lo, hi, eig, ds=step / 2, ds_max=min(step, 0.2 * max(span, 1.0)),
-                               tol_re=ZERO_RE * 10) if starts else []
+                               tol_re=ZERO_RE * 10, max_steps=max(2000, 20 * points)) if starts else []
     nreport = len(problem.free) + len(problem.rate_unknowns)
     names = list(problem.free) + [f"der({c})" for c in problem.rate_unknowns]
     angles = [problem.angles.get(c, False) for c in problem.free] + [False] * len(problem.rate_unknowns)
     result = SweepResult(name, names, angles, branches)
+    cut = [k for k, branch in enumerate(branches, start=1) if branch.truncated]
+    if cut:
+        result.notes.append(f"branch(es) {', '.join(map(str, cut))} ended at the step limit ({max(2000, 20 * points)} "
+                            "steps) inside the range: they are incomplete, and a start found on their untraced part "
+                            "may appear as a further branch (use fewer points or a narrower range)")
     events = []
     for branch in branches:
         for bif in branch.bifurcations:

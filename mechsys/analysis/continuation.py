@@ -38,6 +38,7 @@ class Bifurcation:
 class Branch:
     points: list[BranchPoint] = field(default_factory=list)
     bifurcations: list[Bifurcation] = field(default_factory=list)
+    truncated: bool = False  # the step limit ended it inside the range (not a bound, a closed loop or ds_min)
 
 
 class _Fail(Exception):
@@ -392,6 +393,7 @@ class _Continuation:
                 break
             if iters <= _EASY_ITER:
                 ds = min(ds * _GROW, self.ds_max)
+        branch.truncated = not (final or closed) and (accepted >= self.max_steps or attempts >= 20 * self.max_steps)
         if closed:
             first = branch.points[0]
             branch.points[-1] = BranchPoint(p=first.p, x=first.x.copy(), eigenvalues=first.eigenvalues.copy(),
@@ -518,4 +520,4 @@ def _merge(bwd: Branch, fwd: Branch) -> Branch:
         if not dup:
             bifs.append(Bifurcation(b.kind, b.p, b.x, b.index + m - 1))
     bifs.sort(key=lambda b: b.index)
-    return Branch(points=points, bifurcations=bifs)
+    return Branch(points=points, bifurcations=bifs, truncated=bwd.truncated or fwd.truncated)

@@ -116,6 +116,7 @@ def sweep_tables(result) -> list[Table]:
     t = Table(f"branches over {result.parameter}", ["branch", result.parameter, *result.names, "stable"])
     for row in result.rows():
         t.add(*row)
+    t.notes.extend(getattr(result, "notes", []))
     b = Table("bifurcations", ["kind", "parameter", "value", "coordinates"])
     for bif in result.bifurcations:
         b.add(bif["kind"], bif["parameter"], bif["value"],
