@@ -89,7 +89,7 @@ def write_figure(path: Path, draw: Callable[[str], None], option: str = "--plot"
 def check_model_file(file: Path) -> None:
     """One line (exit 2) for a model file that is missing, unreadable, not a regular file (a FIFO would hang
     the run) or too large, before anything else reads it."""
-    from mechsys.model.load import read_model_text
+    from mechsys.model.files import read_model_text  # light: the warm path must not import sympy or pydantic
 
     read_model_text(file)
 
@@ -97,7 +97,7 @@ def check_model_file(file: Path) -> None:
 # ----------------------------------------------------------------------------------------- numeric options
 MAX_POINTS = 10**7  # output grid points of simulate and --frf
 MAX_TASKS = 10**6  # tasks of one sweep
-MAX_SWEEP_POINTS = 1000  # continuation points of --sweep (each branch may take at most 2000 steps)
+MAX_SWEEP_POINTS = 1000  # continuation points of --sweep (each point costs an eigenvalue problem)
 MAX_T_END = 1e9  # [s]: beyond, steps fall below the time resolution of double precision
 MIN_RTOL = 100 * sys.float_info.epsilon  # tighter tolerances than ~2e-14 cannot be met in double precision
 MAX_JOBS = 256
@@ -842,7 +842,7 @@ def sweep(
         names = [a.name for a in axes]
         tasks = sw.make_tasks(axes, sampling, seed)
         resume = sw.load_resume(output, names, model)
-        from mechsys.model.load import read_model_text
+        from mechsys.model.files import read_model_text
 
         spec = sw.SweepSpec(str(file.resolve()), read_model_text(file), tuple(sets.items()), analysis, options)
 

@@ -4,7 +4,6 @@ from __future__ import annotations
 import difflib
 import os
 import re
-import stat
 from dataclasses import dataclass, field
 from typing import Any, Mapping
 
@@ -13,6 +12,7 @@ import sympy as sp
 
 from mechsys.errors import InputError
 from mechsys.model.expressions import RESERVED, ExpressionError, names_in, parse_expression
+from mechsys.model.files import read_model_text
 from mechsys.model.schema import System
 from mechsys.model.yamlpos import Path, PositionMap, dotted, load_yaml
 
@@ -338,48 +338,6 @@ def _hint(name: str, options: list[str]) -> str:
 
 
 # ----------------------------------------------------------------------------------------- entry point
-MAX_MODEL_BYTES = 10 * 1024 * 1024  # model files are text of a few kB; a larger "model" is a mistake
-
-
-def _open_model(file: str) -> int:
-    """A read-only descriptor of a regular file; never blocks (a FIFO is opened non-blocking, then refused)."""
-    try:
-        fd = os.open(file, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
-    except FileNotFoundError:
-        raise InputError(f"{file}: no such file") from None
-    except IsADirectoryError:
-        raise InputError(f"{file}: is a directory, expected a model file") from None
-    except OSError as exc:
-        raise InputError(f"{file}: cannot read: {(exc.strerror or str(exc)).lower()}") from None
-    info = os.fstat(fd)
-    problem = ("is a directory, expected a model file" if stat.S_ISDIR(info.st_mode) else
-               "cannot read: not a regular file (a device, FIFO or socket)" if not stat.S_ISREG(info.st_mode) else
-               f"cannot read: larger than {MAX_MODEL_BYTES // 2**20} MB (the limit of a model file)"
-               if info.st_size > MAX_MODEL_BYTES else None)
-    if problem:
-        os.close(fd)
-        raise InputError(f"{file}: {problem}")
-    return fd
-
-
-def read_model_text(path: str | os.PathLike) -> str:
-    """The text of a model file (UTF-8, at most MAX_MODEL_BYTES), or a one-line InputError: missing, a directory,
-    not a regular file (FIFO, device), too large, unreadable, not UTF-8."""
-    file = os.fspath(path)
-    fd = _open_model(file)
-    try:
-        with os.fdopen(fd, encoding="utf-8") as fh:
-            text = fh.read(MAX_MODEL_BYTES + 1)
-    except UnicodeDecodeError:
-        raise InputError("the file is not UTF-8 text", file, 1, 1) from None
-    except OSError as exc:
-        raise InputError(f"{file}: cannot read: {(exc.strerror or str(exc)).lower()}") from None
-    if len(text) > MAX_MODEL_BYTES:
-        raise InputError(f"{file}: cannot read: larger than {MAX_MODEL_BYTES // 2**20} MB (the limit of a model "
-                         "file)")
-    return text
-
-
 def read_document(path: str | os.PathLike, overrides: Mapping[str, Any] | None = None,
                   release_prescribed: bool = False) -> Document:
     """Read and validate a model file, resolve parameters and coordinates; raise InputError on bad input.
