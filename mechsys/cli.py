@@ -306,7 +306,7 @@ def parse_ranges(items: Optional[List[str]], option: str, count: bool = False) -
         check_range(f"{option} {item!r}", values[0], values[1], ordered=not count)
         if count:
             check_number(f"{option} {item!r}: N", values[2], high=MAX_SWEEP_POINTS,
-                         why="each branch is followed in at most 2000 continuation steps")
+                         why="each point costs an eigenvalue problem; narrow the range instead")
         out[name.strip()] = tuple(values)
     return out
 
