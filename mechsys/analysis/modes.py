@@ -114,10 +114,13 @@ def reduce(model: MechanicalModel, lin: Linearization) -> tuple[ReducedSystem, l
         kscale = max(1e-300, float(np.max(np.abs(K)))) if K.size else 1.0
         if np.linalg.matrix_rank(Kss, tol=1e-12 * kscale) < len(massless):
             loose = [names[i] for k, i in enumerate(massless) if np.max(np.abs(Kss[k, :])) <= 1e-12 * kscale]
+            which = loose or condensed
+            one = len(which) == 1
             raise AnalysisError(
-                f"{', '.join(loose or condensed)} carr{'ies' if len(loose or condensed) == 1 else 'y'} no mass or "
-                "inertia and no stiffness holds it: static condensation is impossible and the linearized motion is "
-                "not determined (give it mass or inertia, a spring, or make it prescribed)")
+                f"{', '.join(which)} carr{'ies' if one else 'y'} no mass or inertia and no stiffness holds "
+                f"{'it' if one else 'them'}: static condensation is impossible and the linearized motion is not "
+                f"determined (give {'it' if one else 'them'} mass or inertia, a spring, or make "
+                f"{'it' if one else 'them'} prescribed)")
         G = -np.linalg.solve(Kss, K[np.ix_(massless, keep)])
         Tc = np.zeros((M.shape[0], len(keep)))
         Tc[keep, range(len(keep))] = 1.0
