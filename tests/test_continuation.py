@@ -244,3 +244,31 @@ def test_equilibria_sweep_step_limit_follows_the_points(monkeypatch):
     assert seen["max_steps"] >= 20 * 300
     assert result.notes and "step limit" in result.notes[0]
     assert any("incomplete" in note for table in sweep_tables(result) for note in table.notes)
+
+
+def test_family_sweep_of_a_given_cyclic_rate_follows_the_closed_form():
+    """Issue 11 item 4: with no torque on the column (Mo = dM = 0) and its rate given (der(alpha) = 7), the
+    steady motions form a family and the column's equation holds identically: the equilibrium equations are
+    over-determined, which ended in `internal error: ValueError: continuation: Newton correction ... nan`.
+    Continuation now follows an independent square subset and checks every equation at every point. Each branch
+    point satisfies the effective-potential balance derived by hand for the centrifuge (arm pivot at a on the
+    column, centre of mass at l, central inertias I2y, I2z):
+        m g l sin(b) = w^2 (m (a + l sin b) l cos b + (I2y - I2z) sin b cos b)."""
+    import math
+
+    import mechsys
+    from mechsys.analysis.bifurcation import sweep
+    from tests.helpers import SYSTEMS_DIR
+
+    model = mechsys.load(SYSTEMS_DIR / "centrifuge.yaml", {"Mo": 0, "dM": 0, "der(alpha)": 7})
+    result = sweep(model, "m", 4.0, 12.0, 9)
+    P = model.parameters
+    a, l, g, I2y, I2z, w = P["a"], P["l"], P["g"], P["I2y"], P["I2z"], 7.0
+    assert len(result.branches) >= 2 and not result.notes
+    for branch in result.branches:
+        assert branch.points[0].p == pytest.approx(4.0) and branch.points[-1].p == pytest.approx(12.0)
+        for pt in branch.points:
+            b, m = float(pt.x[0]), pt.p
+            balance = m * g * l * math.sin(b) - w**2 * (m * (a + l * math.sin(b)) * l * math.cos(b)
+                                                        + (I2y - I2z) * math.sin(b) * math.cos(b))
+            assert abs(balance) < 1e-8, (m, b, balance)

@@ -9,7 +9,7 @@ import sympy as sp
 from mechsys.analysis.continuation import Branch, sweep_parameter
 from mechsys.analysis.equilibria import EquilibriumProblem, parameter_values, solve_equilibria, wrap
 from mechsys.analysis.stability import ZERO_RE, eigen, reduced_pencil
-from mechsys.errors import InputError
+from mechsys.errors import AnalysisError, InputError
 from mechsys.mechanics.model import MechanicalModel
 
 
@@ -64,15 +64,17 @@ def sweep(model: MechanicalModel, name: str, start: float, stop: float, points: 
     def pvec(p: float) -> np.ndarray:
         return parameter_values(model, {name: p})
 
+    rows: list[int] | slice = slice(None)  # the equations continued on (a square system), chosen below
+
     def F(z, p):
-        return problem.F(z, pvec(p))
+        return problem.F(z, pvec(p))[rows]
 
     def Fx(z, p):
-        return problem.J(z, pvec(p))
+        return problem.J(z, pvec(p))[rows]
 
     def Fp(z, p):
         values = dict(zip([s.name for s in model.parameter_symbols], pvec(p)))
-        return problem.Fp(z, pvec(p)) @ sens(values)
+        return (problem.Fp(z, pvec(p)) @ sens(values))[rows]
 
     def eig(z, p):
         problem.current_parameters = pvec(p)
@@ -85,9 +87,16 @@ def sweep(model: MechanicalModel, name: str, start: float, stop: float, points: 
             starts.append((z, float(p)))
     span = hi - lo if hi > lo else 1.0
     step = span / max(points - 1, 1)
+    if starts:
+        rows = _independent_rows(problem.J(starts[0][0], pvec(starts[0][1])))
     # the step limit grows with the points asked for (a branch needs at least points - 1 steps to cross the range)
-    branches = sweep_parameter(F, Fx, Fp, starts, lo, hi, eig, ds=step / 2, ds_max=min(step, 0.2 * max(span, 1.0)),
-                               tol_re=ZERO_RE * 10, max_steps=max(2000, 20 * points)) if starts else []
+    try:
+        branches = sweep_parameter(F, Fx, Fp, starts, lo, hi, eig, ds=step / 2,
+                                   ds_max=min(step, 0.2 * max(span, 1.0)), tol_re=ZERO_RE * 10,
+                                   max_steps=max(2000, 20 * points)) if starts else []
+    except ValueError as exc:
+        raise AnalysisError(f"--sweep {name}: {exc}") from None
+    _check_all_equations(problem, branches, pvec, name)
     nreport = len(problem.free) + len(problem.rate_unknowns)
     names = list(problem.free) + [f"der({c})" for c in problem.rate_unknowns]
     angles = [problem.angles.get(c, False) for c in problem.free] + [False] * len(problem.rate_unknowns)
@@ -105,6 +114,31 @@ def sweep(model: MechanicalModel, name: str, start: float, stop: float, points: 
     result.bifurcations = _merge_events(events, angles, step)
     result.bifurcations.sort(key=lambda b: (b["value"], b["kind"]))
     return result
+
+
+def _independent_rows(J: np.ndarray) -> list[int]:
+    """As many independent equations as there are unknowns (QR with column pivoting of J^T). The equilibrium
+    equations are over-determined when a cyclic coordinate's rate is given (a family of steady motions): its
+    equation then holds identically, and continuation needs a square system."""
+    from scipy.linalg import qr
+
+    m, n = J.shape
+    if m <= n:
+        return list(range(m))
+    _, _, pivots = qr(J.T, pivoting=True, mode="economic")
+    return sorted(int(k) for k in pivots[:n])
+
+
+def _check_all_equations(problem: EquilibriumProblem, branches: list[Branch], pvec, name: str) -> None:
+    """Every continued point must satisfy ALL equilibrium equations, not only the ones continuation solved."""
+    for k, branch in enumerate(branches, start=1):
+        for pt in branch.points:
+            F = problem.F(pt.x, pvec(pt.p))
+            scale = 1.0 + float(np.max(np.abs(problem.J(pt.x, pvec(pt.p))), initial=0.0))
+            if not np.all(np.isfinite(F)) or float(np.max(np.abs(F), initial=0.0)) > 1e-6 * scale:
+                raise AnalysisError(f"--sweep {name}: on branch {k} at {name} = {pt.p:g} the equilibrium equations "
+                                    f"do not all hold (residual {float(np.max(np.abs(F))):.3g}): the steady-motion "
+                                    "equations are over-determined there, and continuation cannot follow them")
 
 
 def _merge_events(events: list[dict], angles: list[bool], step: float) -> list[dict]:
