@@ -17,6 +17,7 @@ from mechsys.cli import app
 ROOT = Path(__file__).resolve().parents[1]
 SYSTEMS = ROOT / "systems"
 DATA = ROOT / "tests" / "data"
+CENTRIFUGE = SYSTEMS / "centrifuge.yaml"
 runner = CliRunner()
 
 
@@ -168,3 +169,56 @@ def test_modes_frf_csv(tmp_path):
 def test_bad_frf_syntax_exits_2(spec):
     result = invoke("modes", DATA / "beads_string.yaml", "--frf", spec)
     assert result.exit_code == 2, result.output
+
+
+@pytest.mark.parametrize("speed, count", [(3, 2), (12, 4), (25, 4)])
+def test_centrifuge_steady_motions_beyond_the_default_rate_box(speed, count):
+    """Issue 11 item 3: with dM = 50/7 and Mo = speed*dM the column turns steadily at `speed` rad/s; at 12 rad/s
+    the default rate box (+-10) dropped every steady motion and printed an empty table with exit 0. Each steady
+    motion must be a root of the arm's balance, derived by hand (effective potential V - T0, arm pivot at a,
+    centre of mass at l, central inertias I2y, I2z):
+        m g l sin(b) = w^2 (m (a + l sin b) l cos b + (I2y - I2z) sin b cos b),
+    and every root of it in (-pi, pi] must be reported (counted here by sign changes on a fine grid)."""
+    import math
+
+    import numpy as np
+
+    import mechsys
+    from mechsys.analysis.equilibria import find_equilibria
+
+    model = mechsys.load(CENTRIFUGE, {"dM": "50/7", "Mo": f"{speed}*50/7"})
+    P = model.parameters
+    m, g, a, l, I2y, I2z, w = P["m"], P["g"], P["a"], P["l"], P["I2y"], P["I2z"], float(speed)
+
+    def balance(b):
+        return m * g * l * np.sin(b) - w**2 * (m * (a + l * np.sin(b)) * l * np.cos(b)
+                                               + (I2y - I2z) * np.sin(b) * np.cos(b))
+
+    grid = np.linspace(-math.pi, math.pi, 200001)
+    roots = int(np.sum(np.sign(balance(grid[:-1])) != np.sign(balance(grid[1:]))))
+    assert roots == count
+    result = find_equilibria(model)
+    assert len(result.equilibria) == count, result.message
+    for e in result.equilibria:
+        assert e.rates["alpha"] == pytest.approx(w, rel=1e-12)
+        assert abs(balance(e.coordinates["beta"])) < 1e-9
+
+
+def test_no_steady_motion_message_names_the_region_covered():
+    """When nothing is found, the message says which region the search covered (here a --search box that
+    excludes the steady speed of 12 rad/s)."""
+    result = runner.invoke(app, ["equilibria", str(CENTRIFUGE), "--set", "dM=50/7", "--set", "Mo=12*50/7",
+                                 "--search", "der(alpha)=-5:5", "-f", "json"])
+    assert result.exit_code == 0, result.output
+    message = json.loads(result.stdout)["message"]
+    assert "no equilibrium found" in message and "der(alpha) in [-5, 5]" in message and "beta in [" in message
+
+
+def test_the_no_equilibrium_example_of_the_docs_is_what_the_tool_prints():
+    """docs/equilibria.md §2.5 shows the output of a search that finds nothing: it must stay true."""
+    doc = (ROOT / "docs" / "equilibria.md").read_text()
+    command = "$ mechsys equilibria systems/problem57.yaml --search q=10:20 -f json\n"
+    shown = doc.split(command, 1)[1].split("```", 1)[0]
+    result = runner.invoke(app, ["equilibria", str(SYSTEMS / "problem57.yaml"), "--search", "q=10:20", "-f", "json"])
+    assert result.exit_code == 0, result.output
+    assert json.loads(result.stdout) == json.loads(shown)

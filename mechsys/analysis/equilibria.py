@@ -320,10 +320,21 @@ def _boxes(problem: EquilibriumProblem, search: dict[str, tuple[float, float]] |
     return boxes
 
 
+def search_report(problem: EquilibriumProblem, search: dict | None, starts: int | None = None) -> str:
+    """What the multistart search covered, in words (for messages that say what could not be found)."""
+    boxes = _boxes(problem, search)
+    names = list(problem.free) + [f"der({c})" for c in problem.rate_unknowns]
+    count = starts if starts is not None else 24 + 24 * len(boxes)
+    region = ", ".join(f"{n} in [{lo:.4g}, {hi:.4g}]" for n, (lo, hi) in zip(names, boxes))
+    return f"Newton from {count + 2} starts covered {region or 'no unknowns'}"
+
+
 def solve_equilibria(problem: EquilibriumProblem, p: np.ndarray, search: dict | None = None, starts: int | None = None,
                      seed: int = 0) -> list[np.ndarray]:
     """All roots found from multistart deflated Newton inside the search box (multipliers start from lstsq)."""
     boxes = _boxes(problem, search)
+    search = search or {}
+    given = [c in search for c in problem.free] + [c in search or f"der({c})" in search for c in problem.rate_unknowns]
     nz = len(boxes)
     rng = np.random.default_rng(seed)
     count = starts if starts is not None else 24 + 24 * nz
@@ -341,7 +352,10 @@ def solve_equilibria(problem: EquilibriumProblem, p: np.ndarray, search: dict | 
         if z is None:
             continue
         z = problem.normalize(z)
-        inside = all(lo - 1e-9 <= z[k] <= hi + 1e-9 or problem.is_angle()[k] for k, (lo, hi) in enumerate(boxes))
+        # a box the user gave (--search) restricts the answer; the default boxes only place the starts, so a root
+        # Newton reaches outside them is kept (a steady speed of 12 rad/s was dropped by the default +-10 box)
+        inside = all(lo - 1e-9 <= z[k] <= hi + 1e-9 or problem.is_angle()[k] or not given[k]
+                     for k, (lo, hi) in enumerate(boxes))
         if not inside:
             continue
         if any(problem.distance(z, r) < 1e-7 * (1 + np.linalg.norm(z[:nz])) for r in roots):
@@ -388,7 +402,7 @@ def find_equilibria(model: MechanicalModel, search: dict[str, tuple[float, float
         assess(problem, e, p)
     equilibria.sort(key=lambda e: tuple(e.coordinates.values()) + tuple(e.rates.values()))
     if not equilibria:
-        message = "no equilibrium found in the search box (multistart search; widen it with --search)"
+        message = f"no equilibrium found: {search_report(problem, search, starts)}; widen it with --search"
     return EquilibriaResult(equilibria, message, problem.cyclic, dict(problem.fixed_rates))
 
 
