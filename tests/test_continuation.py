@@ -272,3 +272,23 @@ def test_family_sweep_of_a_given_cyclic_rate_follows_the_closed_form():
             balance = m * g * l * math.sin(b) - w**2 * (m * (a + l * math.sin(b)) * l * math.cos(b)
                                                         + (I2y - I2z) * math.sin(b) * math.cos(b))
             assert abs(balance) < 1e-8, (m, b, balance)
+
+
+def test_conservative_branches_carry_the_point_verdict():
+    """Issue 11 item 4: branch stability came from the eigenvalue test alone, so every conservative branch was
+    drawn unstable (dashed). The double pendulum hanging at rest is a strict minimum of the potential for every
+    mass (Lagrange-Dirichlet: stable); the three configurations with a rod upright are maxima or saddles of it
+    (unstable). Along a sweep of m1 each branch point carries that verdict."""
+    import mechsys
+    from mechsys.analysis.bifurcation import sweep
+    from mechsys.report.equilibria import sweep_tables
+    from tests.helpers import SYSTEMS_DIR
+
+    result = sweep(mechsys.load(SYSTEMS_DIR / "double_pendulum.yaml"), "m1", 1.0, 2.0, 11)
+    assert len(result.branches) == 4
+    for branch in result.branches:
+        hanging = all(abs(float(x)) < 1e-9 for x in branch.points[0].x[:2])
+        for pt in branch.points:
+            assert pt.verdict == ("stable" if hanging else "unstable") and pt.stable == hanging
+    rows = [t for t in sweep_tables(result) if t.title.startswith("branches")][0]
+    assert rows.columns[-2:] == ["stable", "verdict"]

@@ -222,3 +222,19 @@ def test_the_no_equilibrium_example_of_the_docs_is_what_the_tool_prints():
     result = runner.invoke(app, ["equilibria", str(SYSTEMS / "problem57.yaml"), "--search", "q=10:20", "-f", "json"])
     assert result.exit_code == 0, result.output
     assert json.loads(result.stdout) == json.loads(shown)
+
+
+def test_the_fold_csv_example_of_the_docs_is_what_the_tool_prints():
+    """docs/equilibria.md shows the branch table around the centrifuge's fold (trimmed): every row shown must be
+    a row the tool prints, verdicts included."""
+    doc = (ROOT / "docs" / "equilibria.md").read_text()
+    command = ("$ mechsys equilibria systems/centrifuge.yaml --set dM=7.142857142857143 --sweep Mo=10:70:61 -f csv"
+               "   (trimmed)\n")
+    shown = [line for line in doc.split(command, 1)[1].split("```", 1)[0].splitlines() if line and line != "..."]
+    result = runner.invoke(app, ["equilibria", str(CENTRIFUGE), "--set", "dM=7.142857142857143", "--sweep",
+                                 "Mo=10:70:61", "-f", "csv"])
+    assert result.exit_code == 0, result.output
+    printed = result.stdout.splitlines()
+    assert shown[0] == printed[0]
+    for line in shown[1:]:
+        assert line in printed, line

@@ -8,7 +8,7 @@ import sympy as sp
 
 from mechsys.analysis.continuation import Branch, sweep_parameter
 from mechsys.analysis.equilibria import EquilibriumProblem, parameter_values, solve_equilibria, wrap
-from mechsys.analysis.stability import ZERO_RE, eigen, reduced_pencil
+from mechsys.analysis.stability import ZERO_RE, assess, eigen, reduced_pencil
 from mechsys.errors import AnalysisError, InputError
 from mechsys.mechanics.model import MechanicalModel
 
@@ -23,12 +23,12 @@ class SweepResult:
     notes: list[str] = field(default_factory=list)
 
     def rows(self) -> list[list]:
-        """(branch, parameter value, coordinates..., stable) for every continuation point."""
+        """(branch, parameter value, coordinates..., stable, verdict) for every continuation point."""
         out = []
         for b, branch in enumerate(self.branches, start=1):
             for pt in branch.points:
                 vals = [wrap(v) if a else float(v) for v, a in zip(pt.x[: len(self.names)], self.angles)]
-                out.append([b, float(pt.p), *vals, bool(pt.stable)])
+                out.append([b, float(pt.p), *vals, bool(pt.stable), pt.verdict])
         return out
 
 
@@ -97,6 +97,7 @@ def sweep(model: MechanicalModel, name: str, start: float, stop: float, points: 
     except ValueError as exc:
         raise AnalysisError(f"--sweep {name}: {exc}") from None
     _check_all_equations(problem, branches, pvec, name)
+    _point_verdicts(problem, branches, pvec)
     nreport = len(problem.free) + len(problem.rate_unknowns)
     names = list(problem.free) + [f"der({c})" for c in problem.rate_unknowns]
     angles = [problem.angles.get(c, False) for c in problem.free] + [False] * len(problem.rate_unknowns)
@@ -141,6 +142,21 @@ def _check_all_equations(problem: EquilibriumProblem, branches: list[Branch], pv
                                     "equations are over-determined there, and continuation cannot follow them")
 
 
+STABLE = ("stable", "asymptotically stable")
+
+
+def _point_verdicts(problem: EquilibriumProblem, branches: list[Branch], pvec) -> None:
+    """Each branch point gets the verdict a single equilibrium would (energy, Routh and gyroscopic arguments
+    included), not only the eigenvalue test: a conservative branch is stable where the point analysis says so
+    (the eigenvalue test alone drew every conservative branch unstable)."""
+    for branch in branches:
+        for pt in branch.points:
+            e = problem.equilibrium(pt.x)
+            assess(problem, e, pvec(pt.p))
+            pt.verdict = e.stability
+            pt.stable = e.stability in STABLE
+
+
 def _merge_events(events: list[dict], angles: list[bool], step: float) -> list[dict]:
     """One entry per bifurcation point. A nontrivial branch folding back exactly where another branch has a
     branch point (a pitchfork) is one branch point, not a fold."""
@@ -177,7 +193,7 @@ def _merge_events(events: list[dict], angles: list[bool], step: float) -> list[d
 
 
 def plot_sweep(result: SweepResult, path: str, coordinate: str | None = None) -> None:
-    """Bifurcation diagram: stable branches solid, unstable dashed, bifurcation points marked."""
+    """Bifurcation diagram: stable branches solid, unstable dashed, undecided dotted, bifurcation points marked."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -194,13 +210,13 @@ def plot_sweep(result: SweepResult, path: str, coordinate: str | None = None) ->
         ys = np.array([pt.x[k] for pt in branch.points], dtype=float)
         if result.angles[k]:
             ys = np.array([wrap(y) for y in ys])
-        stable = np.array([pt.stable for pt in branch.points])
+        style = ["-" if pt.stable else ":" if pt.verdict == "undecided" else "--" for pt in branch.points]
         start = 0
-        for i in range(1, len(ps) + 1):  # one line per run of equal stability (so dashes show)
+        for i in range(1, len(ps) + 1):  # one line per run of equal verdict (so dashes show)
             jump = i < len(ps) and result.angles[k] and abs(ys[i] - ys[i - 1]) > np.pi
-            if i == len(ps) or stable[i] != stable[start] or jump:
+            if i == len(ps) or style[i] != style[start] or jump:
                 end = i if jump or i == len(ps) else i + 1
-                ax.plot(ps[start:end], ys[start:end], "-" if stable[start] else "--", color=f"C{b % 10}", lw=1.8)
+                ax.plot(ps[start:end], ys[start:end], style[start], color=f"C{b % 10}", lw=1.8)
                 start = i
     for bif in result.bifurcations:
         y = list(bif["coordinates"].values())[k] if bif["coordinates"] else 0.0
@@ -208,7 +224,7 @@ def plot_sweep(result: SweepResult, path: str, coordinate: str | None = None) ->
         ax.annotate(bif["kind"], (bif["value"], y), textcoords="offset points", xytext=(4, 4), fontsize=8)
     ax.set_xlabel(result.parameter)
     ax.set_ylabel(result.names[k])
-    ax.set_title("equilibrium branches (solid: stable, dashed: unstable)")
+    ax.set_title("equilibrium branches (solid: stable, dashed: unstable, dotted: undecided)")
     ax.grid(True, alpha=0.3)
     fig.tight_layout()
     fig.savefig(path)

@@ -23,7 +23,8 @@ class BranchPoint:
     p: float
     x: np.ndarray            # the unknowns
     eigenvalues: np.ndarray  # complex, from the caller's eig callback (stability of this point)
-    stable: bool             # all Re(eigenvalues) < -tol_re
+    stable: bool             # all Re(eigenvalues) < -tol_re (callers may refine it: see `verdict`)
+    verdict: str = ""        # a caller's Lyapunov verdict of this point (bifurcation.sweep: the point analysis's)
 
 
 @dataclass

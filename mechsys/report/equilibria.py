@@ -113,7 +113,7 @@ def symbolic_tables(mats: dict, names: list[str]) -> list[Table]:
 
 
 def sweep_tables(result) -> list[Table]:
-    t = Table(f"branches over {result.parameter}", ["branch", result.parameter, *result.names, "stable"])
+    t = Table(f"branches over {result.parameter}", ["branch", result.parameter, *result.names, "stable", "verdict"])
     for row in result.rows():
         t.add(*row)
     t.notes.extend(getattr(result, "notes", []))
