@@ -224,3 +224,17 @@ def test_undetermined_massless_coordinate_equilibria_say_so(model, coordinate):
 def test_undetermined_massless_coordinate_modes_name_it(model, coordinate):
     err = analysis_error("modes", DATA / model)
     assert f"{coordinate} carries no mass or inertia" in err
+
+
+@pytest.mark.parametrize("command", [["simulate", "--t-end", "0.1", "--method", "Radau"], ["simulate", "--t-end", "0.1"],
+                                     ["info"]])
+def test_parameters_that_overflow_the_equations_are_one_reasoned_line(command, tmp_path):
+    """Found by the rotating-seed CLI fuzz (seed 20261123195802): the ballistic pendulum with M = 1e200 and
+    --set rG=M squares 1e200 in the generated code. Python's float power raises OverflowError and numpy's SVD did
+    not converge: both were internal errors. Generated code now returns inf/nan like numpy, and the analyses
+    say the equations are not finite."""
+    text = (Path(__file__).resolve().parent / "data" / "p42_ballistic_pendulum.yaml").read_text()
+    path = tmp_path / "huge.yaml"
+    path.write_text(text.replace("  M: 5 ", "  M: 1.0e+200 "))  # a YAML float: --set takes exact numbers only
+    err = analysis_error(command[0], path, "--set", "rG=M", *command[1:])
+    assert "not finite" in err and "check the parameter values" in err

@@ -6,6 +6,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from mechsys.analysis.crosscheck import random_states
+from mechsys.errors import AnalysisError
 from mechsys.mechanics.model import MechanicalModel
 from mechsys.numeric.lambdify import compile_matrix
 
@@ -84,6 +85,9 @@ def system_info(model: MechanicalModel) -> Info:
     notes = []
     if nfree:
         Ms = [M_fn(t, q, u, p) for t, q, u in states]
+        if not all(np.all(np.isfinite(M)) for M in Ms):
+            raise AnalysisError("the mass matrix is not finite at sample states (an overflow or a division by zero: "
+                                "check the parameter values, e.g. a mass of 1e200 squared)")
         massless = [c for i, c in enumerate(model.coordinates)
                     if all(abs(M[i, i]) <= 1e-12 * max(1.0, float(np.max(np.abs(M)))) for M in Ms)]
         if _rank(Ms[0]) < nfree:

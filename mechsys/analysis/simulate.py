@@ -470,7 +470,11 @@ def _start(model: MechanicalModel, c: Compiled, p: np.ndarray) -> tuple[np.ndarr
     if moved:
         warnings.append("initial state assembled onto the constraints by Newton from the file's values (the "
                         "branch nearest them): " + ", ".join(moved))
-    M0, _ = c.eqs.evaluate(0.0, q0, u0, p)
+    with np.errstate(all="ignore"):
+        M0, f0 = c.eqs.evaluate(0.0, q0, u0, p)
+    if not (np.all(np.isfinite(M0)) and np.all(np.isfinite(f0))):
+        raise AnalysisError("the mass matrix or the forces are not finite at t = 0 (an overflow or a division by "
+                            "zero: check the parameter values, e.g. a mass of 1e200 squared)")
     cond = np.linalg.cond(M0) if M0.size else 1.0
     if cond > 1e8:
         warnings.append(f"the mass matrix is badly conditioned (cond = {cond:.2e}): results may lose accuracy")

@@ -12,6 +12,7 @@ import numpy as np
 import sympy as sp
 
 from mechsys.numeric.lambdify import function_from_source, generate_source
+from mechsys.numeric.runtime import call_generated
 
 
 @dataclass
@@ -22,9 +23,14 @@ class CompiledEquations:
     bodies: list[tuple[bool, bool]]  # (has mass, has inertia) per body
     _fn: object
 
+    @property
+    def size(self) -> int:
+        """Number of values the staged function returns."""
+        return self.n + sum((3 * self.n + 4) * m + (3 * self.n + 15) * i for m, i in self.bodies)
+
     def evaluate(self, t: float, q: Sequence[float], u: Sequence[float], p: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
         n = self.n
-        out = np.asarray(self._fn(t, *q, *u, *p), dtype=float)
+        out = np.asarray(call_generated(self._fn, (t, *q, *u, *p), self.size), dtype=float)
         f = out[:n].copy()  # Q + potential forces (gravity excluded)
         M = np.zeros((n, n))
         k = n

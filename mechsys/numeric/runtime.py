@@ -58,6 +58,17 @@ def function_from_source(source: str) -> Callable[..., list[float]]:
     return namespace["_f"]
 
 
+def call_generated(fn: Callable[..., list[float]], args: Sequence[float], size: int) -> list[float]:
+    """``fn(*args)`` with IEEE semantics: Python's float arithmetic raises where numpy gives inf or nan (x**2 past
+    1e308, 1/0), so those become inf or nan entries and the callers' finiteness checks report them."""
+    try:
+        return fn(*args)
+    except OverflowError:
+        return [math.inf] * size
+    except ZeroDivisionError:
+        return [math.nan] * size
+
+
 @dataclass
 class StateFunction:
     """``fn(t, q, u, p)`` evaluating a symbolic matrix at numeric arrays; shape is the matrix shape."""
@@ -68,8 +79,8 @@ class StateFunction:
     def __call__(self, t: float, q: Sequence[float], u: Sequence[float], p: Sequence[float]) -> np.ndarray:
         if self.shape[0] == 0 or self.shape[1] == 0:
             return np.zeros(self.shape)
-        out = self._fn(t, *q, *u, *p)
-        return np.array(out, dtype=float).reshape(self.shape)
+        return np.array(call_generated(self._fn, (t, *q, *u, *p), self.shape[0] * self.shape[1]),
+                        dtype=float).reshape(self.shape)
 
 
 def matrix_from_source(desc: dict) -> StateFunction:
