@@ -257,3 +257,15 @@ def test_sweep_model_copies_live_in_a_private_folder(tmp_path):
     assert copy.read_text() == text
     assert copy.parent.stat().st_mode & 0o777 == 0o700
     assert copy.parent.name != f"mechsys-sweep-{os.getuid()}"
+
+
+def test_the_arithmetic_check_allows_what_sympy_prints_and_nothing_else():
+    from mechsys.numeric.runtime import check_source, function_from_source
+
+    fn = function_from_source("def _f(a0):\n    return [float('nan'), float('-inf'), (1.0 if False else a0)]")
+    out = fn(2.0)
+    assert math.isnan(out[0]) and out[1] == -math.inf and out[2] == 2.0
+    for bad in ["def _f(a0):\n    return [float('1e5')]", "def _f(a0):\n    return [abs('x')]",
+                "def _f(a0):\n    return [getattr(a0, 'real')]", "def _f(a0):\n    return [math.__loader__]"]:
+        with pytest.raises(ValueError):
+            check_source(bad)

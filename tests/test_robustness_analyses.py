@@ -238,3 +238,25 @@ def test_parameters_that_overflow_the_equations_are_one_reasoned_line(command, t
     path.write_text(text.replace("  M: 5 ", "  M: 1.0e+200 "))  # a YAML float: --set takes exact numbers only
     err = analysis_error(command[0], path, "--set", "rG=M", *command[1:])
     assert "not finite" in err and "check the parameter values" in err
+
+
+def test_generated_code_with_boolean_constants_is_accepted(tmp_path):
+    """Found by the rotating-seed fuzz: native_functions with k = 1e15 makes sympy print `False` (and can print
+    float('nan')) in generated source, which the arithmetic-only check refused with an internal error. `modes`
+    now ends in its own reasoned message."""
+    text = (Path(__file__).resolve().parent / "data" / "native_functions.yaml").read_text()
+    path = tmp_path / "stiff.yaml"
+    path.write_text(text.replace("parameters: {m: 1.5, k: 40,", "parameters: {m: 1.5, k: 1000000000000000.0,"))
+    err = analysis_error("modes", path, "-f", "json")
+    assert "no equilibrium found to vibrate about" in err
+
+
+def test_an_implicit_method_on_overflowing_equations_is_one_reasoned_line(tmp_path):
+    """Found by the rotating-seed fuzz: the bouncing ball with g = 1e201 on Radau ended in scipy's bare
+    `ValueError: array must not contain infs or NaNs`."""
+    text = (Path(__file__).resolve().parents[1] / "systems" / "bouncing_ball.yaml").read_text()
+    path = tmp_path / "heavy.yaml"
+    path.write_text("\n".join("  g: 9.999999999999999e+200" if line.startswith("  g: 9.81") else line
+                              for line in text.splitlines()) + "\n")
+    err = analysis_error("simulate", path, "--t-end", "0.1", "--method", "Radau", "--set", "e=0")
+    assert "not finite" in err

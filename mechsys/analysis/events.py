@@ -125,6 +125,20 @@ def _solution(ts: list, interpolants: list, method: str):
         return OdeSolution(ts, interpolants)
 
 
+def _not_finite_is_an_analysis_error(action: Callable, t: float):
+    """``action()``; scipy's implicit methods refuse a non-finite Jacobian or state with a bare ValueError
+    ("array must not contain infs or NaNs"), which becomes the AnalysisError the native path gives."""
+    from mechsys.errors import AnalysisError
+
+    try:
+        return action()
+    except ValueError as exc:
+        if "inf" not in str(exc) and "nan" not in str(exc).lower():
+            raise
+        raise AnalysisError(f"integration failed at t = {t:.6g}: the state or its derivative is not finite (an "
+                            "overflow: check the parameter values)") from None
+
+
 def solve_ivp(fun: Callable, t_span: Sequence[float], y0: np.ndarray, method: str = "DOP853", t_eval=None,
               dense_output: bool = False, events: Sequence[Callable] | None = None, **options):
     """scipy's solve_ivp (the subset mechsys uses: forward in time, method by name), with events located inside
@@ -134,7 +148,7 @@ def solve_ivp(fun: Callable, t_span: Sequence[float], y0: np.ndarray, method: st
 
     t0, tf = map(float, t_span)
     y0 = np.asarray(y0, dtype=float)
-    solver = _solver_class(method)(fun, t0, y0, tf, **options)
+    solver = _not_finite_is_an_analysis_error(lambda: _solver_class(method)(fun, t0, y0, tf, **options), t0)
     t_eval = None if t_eval is None else np.asarray(t_eval, dtype=float)
     ts, ys, interpolants, t_eval_i = ([t0], [y0], [], 0) if t_eval is None else ([], [], [], 0)
     knots = [t0]
@@ -146,7 +160,7 @@ def solve_ivp(fun: Callable, t_span: Sequence[float], y0: np.ndarray, method: st
     y_events: list[list[np.ndarray]] = [[] for _ in events]
     status, message, first = None, "", True
     while status is None:
-        message = solver.step()
+        message = _not_finite_is_an_analysis_error(solver.step, solver.t)
         if solver.status == "failed":
             status = -1
             break

@@ -36,10 +36,14 @@ def check_source(source: str) -> None:
             if not (isinstance(node.value, ast.Name) and node.value.id == "math" and node.attr in _MATH):
                 raise ValueError("generated source may only use attributes of math")
             math_bases.add(id(node.value))
+    # sympy prints nan and infinities as float('nan'), float('inf'), float('-inf'): the only strings allowed
+    special = {id(node.args[0]) for node in nodes if isinstance(node, ast.Call) and isinstance(node.func, ast.Name)
+               and node.func.id == "float" and len(node.args) == 1 and isinstance(node.args[0], ast.Constant)
+               and node.args[0].value in ("nan", "inf", "-inf")}
     for node in nodes:
         if not isinstance(node, _NODES) or (isinstance(node, ast.FunctionDef) and node is not fn):
             raise ValueError(f"generated source contains {type(node).__name__}")
-        if isinstance(node, ast.Constant) and type(node.value) not in (int, float):
+        if isinstance(node, ast.Constant) and type(node.value) not in (int, float, bool) and id(node) not in special:
             raise ValueError("generated source contains a non-numeric constant")
         if isinstance(node, ast.Name) and (node.id.startswith("_") or node.id == "math") \
                 and id(node) not in math_bases:
