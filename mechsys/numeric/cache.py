@@ -108,8 +108,11 @@ def _secret() -> bytes | None:
 
 
 def sign(data: bytes) -> str:
+    """HMAC-SHA256 of ``data`` under the user's key (callers reach it only through `usable_dir`, which needs one)."""
     secret = _secret()
-    return hmac.new(secret or b"", data, hashlib.sha256).hexdigest()
+    if secret is None:
+        raise OSError("no cache signing key")  # never sign with an empty key; callers treat OSError as uncached
+    return hmac.new(secret, data, hashlib.sha256).hexdigest()
 
 
 def _verified(blob: bytes | None) -> bytes | None:
