@@ -67,6 +67,7 @@ class EquilibriaResult:
     message: str = ""
     cyclic: list[str] = field(default_factory=list)
     fixed_rates: dict[str, float] = field(default_factory=dict)
+    search: SearchReport | None = None
 
 
 class EquilibriumProblem:
@@ -130,6 +131,37 @@ class EquilibriumProblem:
                     abs(fn(*rng.uniform(-2, 2, len(syms)), *p)[i]) < 1e-12 for _ in range(4))):
                 fixed[c] = self.model.doc.initial_rate[c]
         return fixed
+
+    @cached_property
+    def linear_rates(self) -> bool:
+        """The rest equations of the cyclic coordinates whose steady rates are unknowns are linear in those rates
+        (e.g. a motor's torque balance Mo - dM*der(alpha) = 0): each start's rates are then solved, not guessed."""
+        if not self.rate_unknowns:
+            return False
+        us = [self._u(c) for c in self.rate_unknowns]
+        rows = [self.residual_exprs[self.model.coordinates.index(c)] for c in self.rate_unknowns]
+        return all(sp.expand(sp.diff(r, a, b)) == 0 for r in rows for a in us for b in us)
+
+    def solve_rates(self, start: np.ndarray, p: np.ndarray) -> np.ndarray:
+        """``start`` with its steady rates solved from their linear equations at its coordinates (unchanged when
+        the equations are not linear in the rates or singular there)."""
+        if not self.linear_rates:
+            return start
+        k = len(self.rate_unknowns)
+        cols = slice(self.nq, self.nq + k)
+        rows = [self.model.coordinates.index(c) for c in self.rate_unknowns]
+        z = np.concatenate([start, np.zeros(self.m)])
+        z[cols] = 0.0
+        b = self.F(z, p)[rows]
+        A = self.J(z, p)[np.ix_(rows, range(self.nq, self.nq + k))]
+        if not (np.all(np.isfinite(A)) and np.all(np.isfinite(b))):
+            return start
+        sv = np.linalg.svd(A, compute_uv=False)
+        if sv[-1] <= 1e-12 * max(1e-300, sv[0]):
+            return start
+        out = start.copy()
+        out[cols] = np.linalg.solve(A, -b)
+        return out
 
     @cached_property
     def unknowns(self) -> list[sp.Symbol]:
@@ -224,18 +256,17 @@ def _newton(problem: EquilibriumProblem, z: np.ndarray, p: np.ndarray, roots: li
     n = len(z)
 
     ang = problem.is_angle()
+    known = np.array(roots, dtype=float).reshape(len(roots), n)
 
     def deflation(z: np.ndarray) -> tuple[float, np.ndarray]:
-        mu, grad_log = 1.0, np.zeros(n)
-        for r in roots:
-            d = z - r
-            if ang.any():
-                d[ang] = np.remainder(d[ang] + np.pi, 2 * np.pi) - np.pi
-            d2 = max(float(d @ d), 1e-28)
-            factor = 1.0 / d2 + 1.0
-            mu *= factor
-            grad_log += (-2.0 * d / d2**2) / factor
-        return mu, grad_log
+        """mu = prod(1/|z - r|^2 + 1) over the roots found, and grad log mu (one array operation for all roots)."""
+        if not len(known):
+            return 1.0, np.zeros(n)
+        d = z - known
+        d[:, ang] = np.remainder(d[:, ang] + np.pi, 2 * np.pi) - np.pi
+        d2 = np.maximum(np.einsum("ij,ij->i", d, d), 1e-28)
+        factor = 1.0 / d2 + 1.0
+        return float(np.prod(factor)), (-2.0 * d / (d2**2 * factor)[:, None]).sum(axis=0)
 
     def G_only(z: np.ndarray) -> float:
         F = problem.F(z, p)
@@ -320,33 +351,96 @@ def _boxes(problem: EquilibriumProblem, search: dict[str, tuple[float, float]] |
     return boxes
 
 
-def search_report(problem: EquilibriumProblem, search: dict | None, starts: int | None = None) -> str:
-    """What the multistart search covered, in words (for messages that say what could not be found)."""
+#: Steady rates whose equations are not linear in them: starts spread log-uniformly over these magnitudes (times
+#: max(1, |initial rate|)), both signs, so slow and fast steady motions are both reached.
+RATE_DECADES = (-1.0, 3.0)
+
+
+@dataclass
+class SearchReport:
+    """How the multistart search was done, for the output (text and JSON) whatever it found."""
+
+    starts: int
+    region: dict[str, tuple[float, float]]  # where the starts were drawn (angles: the whole circle)
+    restricted: list[str]  # names whose box the user gave with --search (roots outside it are discarded)
+    solved_rates: list[str]  # steady rates solved from their linear equations at every start
+    spread_rates: list[str]  # steady rates drawn log-uniformly (RATE_DECADES)
+    outside: list[str] = field(default_factory=list)  # "name = value" of roots beyond the default start boxes
+    deflation: bool = True
+
+    def text(self) -> str:
+        parts = []
+        for name, (lo, hi) in self.region.items():
+            if name in self.solved_rates:
+                parts.append(f"{name} solved from its linear equation at each start")
+            elif name in self.spread_rates:
+                parts.append(f"|{name}| log-spread over [{lo:.4g}, {hi:.4g}], both signs")
+            else:
+                parts.append(f"{name} in [{lo:.4g}, {hi:.4g}]" + (" (--search)" if name in self.restricted else ""))
+        text = f"deflated Newton from {self.starts} starts: {', '.join(parts) or 'no unknowns'}"
+        if self.outside:
+            text += f"; roots beyond the start box (kept): {', '.join(self.outside)}"
+        return text
+
+    def to_dict(self) -> dict:
+        return {"starts": self.starts, "region": {k: list(v) for k, v in self.region.items()},
+                "restricted": self.restricted, "solved_rates": self.solved_rates, "spread_rates": self.spread_rates,
+                "outside": self.outside, "deflation": self.deflation}
+
+
+def search_plan(problem: EquilibriumProblem, search: dict | None, starts: int | None = None) -> SearchReport:
     boxes = _boxes(problem, search)
+    search = search or {}
     names = list(problem.free) + [f"der({c})" for c in problem.rate_unknowns]
     count = starts if starts is not None else 24 + 24 * len(boxes)
-    region = ", ".join(f"{n} in [{lo:.4g}, {hi:.4g}]" for n, (lo, hi) in zip(names, boxes))
-    return f"Newton from {count + 2} starts covered {region or 'no unknowns'}"
+    given = [n for n, c in zip(names, list(problem.free) + list(problem.rate_unknowns)) if n in search or c in search]
+    rates = [f"der({c})" for c in problem.rate_unknowns]
+    solved = [r for r in rates if problem.linear_rates and r not in given]
+    spread = [r for r in rates if not problem.linear_rates and r not in given]
+    region = dict(zip(names, boxes))
+    for r, c in zip(rates, problem.rate_unknowns):
+        if r in spread:
+            scale = max(1.0, abs(problem.model.doc.initial_rate.get(c, 0.0)))
+            region[r] = (scale * 10 ** RATE_DECADES[0], scale * 10 ** RATE_DECADES[1])
+    return SearchReport(count + 2, region, given, solved, spread)
+
+
+def search_report(problem: EquilibriumProblem, search: dict | None, starts: int | None = None) -> str:
+    """What the multistart search covered, in words (for messages that say what could not be found)."""
+    return search_plan(problem, search, starts).text()
+
+
+def _draw(plan: SearchReport, rng: np.random.Generator) -> np.ndarray:
+    out = []
+    for name, (lo, hi) in plan.region.items():
+        if name in plan.spread_rates:
+            out.append(rng.choice((-1.0, 1.0)) * 10 ** rng.uniform(math.log10(lo), math.log10(hi)))
+        else:
+            out.append(rng.uniform(lo, hi))
+    return np.array(out)
 
 
 def solve_equilibria(problem: EquilibriumProblem, p: np.ndarray, search: dict | None = None, starts: int | None = None,
-                     seed: int = 0) -> list[np.ndarray]:
+                     seed: int = 0, report: SearchReport | None = None) -> list[np.ndarray]:
     """All roots found from multistart deflated Newton inside the search box (multipliers start from lstsq)."""
-    boxes = _boxes(problem, search)
-    search = search or {}
-    given = [c in search for c in problem.free] + [c in search or f"der({c})" in search for c in problem.rate_unknowns]
+    plan = search_plan(problem, search, starts) if report is None else report
+    boxes = list(plan.region.values())
+    names = list(plan.region)
+    given = [n in plan.restricted for n in names]
+    default_box = _boxes(problem, None)
     nz = len(boxes)
     rng = np.random.default_rng(seed)
-    count = starts if starts is not None else 24 + 24 * nz
+    count = plan.starts - 2
     candidates = []
     initial = [problem.model.doc.initial.get(c, 0.0) for c in problem.free] + [
         problem.model.doc.initial_rate.get(c, 0.0) for c in problem.rate_unknowns]
     candidates.append(np.array(initial, dtype=float))
     candidates.append(np.zeros(nz))
     for _ in range(count):
-        candidates.append(np.array([rng.uniform(lo, hi) for lo, hi in boxes]))
+        candidates.append(_draw(plan, rng))
     roots: list[np.ndarray] = []
     for start in candidates:
+        start = problem.solve_rates(_onto_constraints(problem, start, p), p)
         z0 = np.concatenate([start, _multiplier_guess(problem, start, p)])
         z = _newton(problem, z0, p, roots)
         if z is None:
@@ -361,7 +455,31 @@ def solve_equilibria(problem: EquilibriumProblem, p: np.ndarray, search: dict | 
         if any(problem.distance(z, r) < 1e-7 * (1 + np.linalg.norm(z[:nz])) for r in roots):
             continue
         roots.append(z)
+        plan.outside += [f"{n} = {z[k]:.6g}" for k, (n, (lo, hi)) in enumerate(zip(names, default_box))
+                         if not (given[k] or problem.is_angle()[k] or n in plan.solved_rates
+                                 or n in plan.spread_rates or lo <= z[k] <= hi)]
     return roots
+
+
+def _onto_constraints(problem: EquilibriumProblem, start: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """The start moved onto the constraint manifold Phi(q) = 0 by minimum-norm Gauss-Newton (the start itself
+    without constraints, or when that fails). A random point of the box lies far from every assembly branch of a
+    closed loop, and the full Newton from there mostly stagnates (Andrews' squeezer: 92% of the starts); from
+    its projection it reaches an equilibrium, and the projections visit every assembly mode."""
+    if not problem.m:
+        return start
+    nq, m = problem.nq, problem.m
+    q = start.copy()
+    for _ in range(30):
+        z = np.concatenate([q, np.zeros(m)])
+        phi = problem.F(z, p)[-m:]
+        A = problem.J(z, p)[-m:, :nq]
+        if not (np.all(np.isfinite(phi)) and np.all(np.isfinite(A))):
+            return start
+        if np.max(np.abs(phi)) <= 1e-12 * max(1.0, float(np.max(np.abs(A)))):
+            return q
+        q[:nq] = q[:nq] + np.linalg.lstsq(A, -phi, rcond=None)[0]
+    return start
 
 
 def _multiplier_guess(problem: EquilibriumProblem, start: np.ndarray, p: np.ndarray) -> np.ndarray:
@@ -382,7 +500,8 @@ def find_equilibria(model: MechanicalModel, search: dict[str, tuple[float, float
     p = parameter_values(model)
     if not problem.unknowns:
         return _every_state(problem, p, search)
-    roots = solve_equilibria(problem, p, search, starts, seed)
+    plan = search_plan(problem, search, starts)
+    roots = solve_equilibria(problem, p, search, starts, seed, plan)
     message = ""
     isolated = []
     family = None
@@ -400,10 +519,14 @@ def find_equilibria(model: MechanicalModel, search: dict[str, tuple[float, float
     equilibria = [problem.equilibrium(z) for z in isolated]
     for e in equilibria:
         assess(problem, e, p)
+    from mechsys.analysis.charts import review
+
+    equilibria, chart_note = review(problem, equilibria, p)
+    message = "; ".join(m for m in (message, chart_note) if m)
     equilibria.sort(key=lambda e: tuple(e.coordinates.values()) + tuple(e.rates.values()))
     if not equilibria:
-        message = f"no equilibrium found: {search_report(problem, search, starts)}; widen it with --search"
-    return EquilibriaResult(equilibria, message, problem.cyclic, dict(problem.fixed_rates))
+        message = f"no equilibrium found: {plan.text()}; widen it with --search"
+    return EquilibriaResult(equilibria, message, problem.cyclic, dict(problem.fixed_rates), plan)
 
 
 def _every_state(problem: EquilibriumProblem, p: np.ndarray, search: dict | None) -> EquilibriaResult:

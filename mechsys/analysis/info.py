@@ -40,6 +40,8 @@ class Info:
     rheonomic: bool
     autonomous: bool
     cyclic: list[str]
+    cyclic_basis: dict[str, str] = field(default_factory=dict)  # absent | symbolic | numeric | declared
+    cyclic_denied: list[str] = field(default_factory=list)  # `cyclic: false` in the file
     massless_coordinates: list[str] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
 
@@ -102,5 +104,7 @@ def system_info(model: MechanicalModel) -> Info:
         prescribed=prescribed, dof_formula=dof_formula, free_coordinates=list(model.coordinates),
         constraint_rank=rank, holonomic_rank=hol_rank, dof=dof, configuration_dof=nfree - hol_rank,
         redundant_constraints=redundant, holonomic=model.is_holonomic, rheonomic=model.is_rheonomic,
-        autonomous=model.is_autonomous(), cyclic=model.cyclic_coordinates(), massless_coordinates=massless,
+        autonomous=model.is_autonomous(), cyclic=model.cyclic_coordinates(),
+        cyclic_basis=dict(model.cyclic_decision.basis), cyclic_denied=list(model.cyclic_decision.denied),
+        massless_coordinates=massless,
         notes=notes)

@@ -46,6 +46,7 @@ class Compiled:
     gap_b: object = None
     gap_names: list = field(default_factory=list)
     native: object = None  # the loaded native integrator (numeric/native.py), once asked for
+    charts: list = field(default_factory=list)  # (link, joint type, sequence, angle indices) of rotation sequences
 
 
 def _contact_sources(model: MechanicalModel, args) -> dict:
@@ -124,7 +125,20 @@ def compile_model(model: MechanicalModel) -> Compiled:
         out = _compiled_from(desc)
         out.cache_hit = False
     out.seconds = time.perf_counter() - t0
+    out.charts = rotation_charts(model)
     model._simulation_compiled = out
+    return out
+
+
+def rotation_charts(model: MechanicalModel) -> list[tuple]:
+    """(link, joint type, sequence, indices of its angles in q) of every spherical or free joint whose three
+    angles are free coordinates: where to look when the mass matrix turns singular (numeric/rotations.py)."""
+    out = []
+    for j in model.kin.joints:
+        angles = j.coordinates[-3:]
+        if j.type in ("spherical", "free") and all(a in model.coordinates for a in angles):
+            sequence = model.doc.spec.links[j.link].joint.sequence
+            out.append((j.link, j.type, sequence, [model.coordinates.index(a) for a in angles]))
     return out
 
 
@@ -187,6 +201,13 @@ class RightHandSide:
             try:
                 return np.linalg.solve(M, f), np.zeros(0)
             except np.linalg.LinAlgError:
+                from mechsys.numeric.rotations import singular_chart
+
+                chart = singular_chart(self.c.charts, q)
+                if chart:
+                    raise AnalysisError(f"the mass matrix is singular at t = {t:.6g}: {chart}; start away from it or "
+                                        "write the joint with another sequence (zyx is singular where the middle "
+                                        "angle is +-pi/2, zxz where it is 0 or pi)") from None
                 raise AnalysisError(f"the mass matrix is singular at t = {t:.6g}: a coordinate, or a combination "
                                     "of them such as a rod's spin about its own axis, carries no mass or inertia "
                                     "(make it prescribed, or give it mass or inertia)") from None

@@ -266,7 +266,10 @@ def _effective_potential(problem, e) -> tuple[sp.Expr, list[sp.Symbol]]:
             raise _MasslessCyclic(
                 f"the cyclic coordinate(s) {', '.join(zero or names)} carry no mass or inertia at this state "
                 f"(singular inertia of the cyclic block), so Routh's amended potential is not defined")
-        U = U + ((pmom - b).T * Mcc.inv() * (pmom - b))[0] / 2  # inverse of the small cyclic block only
+        # inverse of the small cyclic block only, by adjugate and determinant: sympy's default inverse searches
+        # pivots with simplify(), seconds per verdict for a rigid body's 1x1 block
+        inverse = Mcc.adjugate() / Mcc.det(method="berkowitz") if Mcc.shape[0] > 1 else sp.Matrix([[1 / Mcc[0, 0]]])
+        U = U + ((pmom - b).T * inverse * (pmom - b))[0] / 2
         U = U.xreplace({model.doc.coords[c]: 0 for c in problem.cyclic})
     qn = [model.doc.coords[c] for c in problem.free]
     return U, qn

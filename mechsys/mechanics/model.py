@@ -347,8 +347,12 @@ class MechanicalModel:
         return True
 
     def cyclic_coordinates(self, method: str = "lagrange") -> list[str]:
-        eq = self.equations(method)
-        syms: set = set()
-        for m in (eq.M, eq.f, eq.A, eq.b):
-            syms |= sp.sympify(m).free_symbols
-        return [n for n, q in zip(self.coordinates, self.q) if q not in syms]
+        """Coordinates the equations of motion do not depend on (mechanics/symmetry.py: decided at random states,
+        confirmed symbolically), plus those the file declares with `cyclic: true`, minus `cyclic: false`."""
+        return list(self.cyclic_decision.names)
+
+    @cached_property
+    def cyclic_decision(self):
+        from mechsys.mechanics.symmetry import decide
+
+        return decide(self)

@@ -36,6 +36,8 @@ class Coordinate(Strict):
     rate: Expr = 0
     prescribed: Expr | None = Field(None, description="expression of t and parameters (rheonomic driver)")
     angle: bool | None = Field(None, description="angular (wraps modulo 2*pi); default: inferred from joints")
+    cyclic: bool | None = Field(None, description="ignorable: true declares it (checked), false denies it; "
+                                                  "default: decided from the equations of motion")
 
 
 # ----------------------------------------------------------------------------------------- inertia

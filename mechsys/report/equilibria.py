@@ -28,6 +28,8 @@ def equilibria_tables(result: EquilibriaResult) -> list[Table]:
         t.add(k, coords, rates, e.stability + (" (critical)" if e.critical else ""), eigs)
     if result.message:
         t.notes.append(result.message)
+    if result.search is not None and not result.message.startswith("no equilibrium found"):
+        t.notes.append(f"search: {result.search.text()}")
     if result.fixed_rates:
         t.notes.append("steady motions form a family; rates fixed at the initial rate: "
                        + ", ".join(f"der({c}) = {fmt_number(v)}" for c, v in result.fixed_rates.items()))
@@ -46,7 +48,8 @@ def equilibria_tables(result: EquilibriaResult) -> list[Table]:
 
 def equilibria_payload(result: EquilibriaResult, bifurcations: list | None = None) -> dict:
     return {"equilibria": [e.to_dict() for e in result.equilibria], "bifurcations": bifurcations or [],
-            "message": result.message, "cyclic": result.cyclic}
+            "message": result.message, "cyclic": result.cyclic,
+            "search": result.search.to_dict() if result.search is not None else None}
 
 
 def matrix_table(title: str, names: list[str], matrix: np.ndarray, row_names: list[str] | None = None) -> Table:

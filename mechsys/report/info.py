@@ -22,9 +22,21 @@ def _facts(info: Info) -> list[tuple[str, str]]:
         ("configuration DOF", str(info.configuration_dof)),
         ("redundant constraints", str(info.redundant_constraints)),
         ("system class", info.system_class),
-        ("cyclic coordinates", ", ".join(info.cyclic) or "none"),
+        ("cyclic coordinates", _cyclic(info)),
         ("massless coordinates", ", ".join(info.massless_coordinates) or "none"),
     ]
+
+
+#: How each cyclic coordinate was decided, in the text outputs (JSON carries the bare keyword).
+_BASIS = {"absent": "", "symbolic": " (after simplification)", "numeric": " (numerically, not proven)",
+          "declared": " (declared)"}
+
+
+def _cyclic(info: Info) -> str:
+    text = ", ".join(f"{c}{_BASIS.get(info.cyclic_basis.get(c, 'absent'), '')}" for c in info.cyclic) or "none"
+    if info.cyclic_denied:
+        text += f"; not treated as cyclic (the file says so): {', '.join(info.cyclic_denied)}"
+    return text
 
 
 def render_markdown(info: Info) -> str:

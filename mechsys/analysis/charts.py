@@ -1,0 +1,169 @@
+"""Rotation charts: where a joint's angles stop determining its angular velocity (gimbal lock), and how a steady
+motion found there is classified in a regular sequence of the same joint instead."""
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass
+
+import numpy as np
+
+from mechsys.analysis.equilibria import Equilibrium, EquilibriumProblem, parameter_values
+from mechsys.numeric.lambdify import compile_exprs
+from mechsys.numeric.rotations import alternatives, angles_of, rate_matrix, ratio, rotation
+
+#: The chart is singular where the smallest singular value of the joint's map (angle rates -> angular velocity),
+#: relative to the largest, is below this.
+SINGULAR = 1e-7
+#: A re-chart is accepted only where that ratio is at least this (well away from its own singular set).
+REGULAR = 0.2
+
+@dataclass
+class Singularity:
+    link: str
+    joint_type: str
+    angles: list[str]
+    sequence: str | None
+    ratio: float
+
+    def describe(self) -> str:
+        chart = f"the {self.sequence} angles" if self.sequence else "the angles"
+        return (f"coordinate singularity: {chart} ({', '.join(self.angles)}) of the {self.joint_type} joint of "
+                f"'{self.link}' do not determine its angular velocity here (gimbal lock: two rotation axes are "
+                f"parallel)")
+
+
+def rotation_joints(model) -> list[tuple]:
+    """(joint info, angle coordinates, sequence) for every joint with two or more free angle coordinates."""
+    out = []
+    for j in model.kin.joints:
+        names = [n for n in j.coordinates if n in model.coordinates and model.angles.get(n, False)]
+        if len(names) >= 2:
+            spec = model.doc.spec.links[j.link].joint
+            sequence = getattr(spec, "sequence", None) if j.type in ("spherical", "free") else None
+            out.append((j, names, sequence))
+    return out
+
+
+def _rate_map(model, link: str, names: list[str]):
+    """Compiled d(omega of link)/d(rates of names) as a function of (q..., parameters...)."""
+    memo = model.__dict__.setdefault("_chart_memo", {})
+    key = (link, tuple(names))
+    if key not in memo:
+        omega = model.kin.frames[link].omega
+        W = omega.jacobian([model.doc.rates[n] for n in names])
+        memo[key] = compile_exprs(list(W), list(model.q) + list(model.parameter_symbols))
+    return memo[key]
+
+
+def singularities(model, coordinates: dict[str, float], p: np.ndarray) -> list[Singularity]:
+    """The rotation joints whose angles are singular at this configuration (cyclic coordinates absent: at 0)."""
+    q = [coordinates.get(c, 0.0) for c in model.coordinates]
+    found = []
+    for j, names, sequence in rotation_joints(model):
+        W = np.array(_rate_map(model, j.link, names)(*q, *p), dtype=float).reshape(3, len(names))
+        sv = np.linalg.svd(W, compute_uv=False)
+        r = float(sv[-1] / sv[0]) if sv[0] > 0 else 0.0
+        if r < SINGULAR:
+            found.append(Singularity(j.link, j.type, names, sequence, r))
+    return found
+
+
+# ----------------------------------------------------------------------------------------- re-charting
+def _chart_model(model, link: str, sequence: str):
+    """The same model with the joint of ``link`` written in ``sequence`` (derived once, kept on the model)."""
+    memo = model.__dict__.setdefault("_chart_models", {})
+    if (link, sequence) not in memo:
+        from mechsys.mechanics.model import MechanicalModel
+
+        doc = copy.copy(model.doc)
+        spec = doc.spec.model_copy(deep=True)
+        spec.links[link].joint.sequence = sequence
+        doc.spec = spec
+        memo[(link, sequence)] = MechanicalModel(doc)
+    return memo[(link, sequence)]
+
+
+def reclassify(problem: EquilibriumProblem, e: Equilibrium, where: Singularity, p: np.ndarray) -> bool:
+    """Classify ``e`` (found at a singular point of ``where``'s chart) in a regular sequence of the same joint.
+    True when it was classified there; False when it is not a steady motion there (an artefact of the singular
+    chart). Raises _Unchartable with the reason when no regular chart can be used."""
+    from mechsys.analysis.stability import assess
+
+    if where.sequence is None:
+        raise _Unchartable("only spherical and free joints can be re-charted (another rotation sequence)")
+    if problem.m:
+        raise _Unchartable("re-charting is not available with closed-loop constraints")
+    a_old = np.array([e.coordinates.get(n, 0.0) for n in where.angles])
+    rates_old = np.array([e.rates.get(n, 0.0) for n in where.angles])
+    R = rotation(where.sequence, a_old)
+    omega = rate_matrix(where.sequence, a_old) @ rates_old
+    best = None
+    for seq in alternatives(where.sequence):
+        a = angles_of(seq, R)
+        if a is not None and (best is None or ratio(rate_matrix(seq, a)) > best[2]):
+            best = (seq, a, ratio(rate_matrix(seq, a)))
+    if best is None or best[2] < REGULAR:
+        raise _Unchartable("no other sequence of the joint is regular here")
+    seq, a_new, _ = best
+    rates_new = np.linalg.solve(rate_matrix(seq, a_new), omega)
+    base = _chart_model(problem.model, where.link, seq)
+    values = {n: float(v) for n, v in zip(where.angles, a_new)}
+    values.update({f"der({n})": float(v) for n, v in zip(where.angles, rates_new)})
+    values.update({f"der({c})": float(v) for c, v in e.rates.items() if c not in where.angles})
+    alt = base.with_overrides(values)
+    other = EquilibriumProblem(alt)
+    moving = [n for n, v in zip(where.angles, rates_new) if abs(v) > 1e-9 * (1 + np.max(np.abs(rates_new)))
+              and n not in other.cyclic]
+    if moving:
+        raise _Unchartable(f"in the {seq} sequence the motion turns the non-cyclic angle(s) {', '.join(moving)}")
+    coords = {c: values.get(c, e.coordinates.get(c, 0.0)) for c in other.free}
+    rates = {c: values.get(f"der({c})", e.rates.get(c, 0.0)) for c in other.cyclic}
+    e2 = Equilibrium(coords, rates, [])
+    q2 = parameter_values(alt)
+    z = other.state(e2)
+    F, J = other.F(z, q2), other.J(z, q2)
+    scale = max(1.0, float(np.max(np.abs(J)))) if J.size else 1.0
+    if not np.all(np.isfinite(F)) or (F.size and np.max(np.abs(F)) > 1e-8 * scale):
+        return False
+    assess(other, e2, q2)
+    e.eigenvalues, e.jacobian, e.critical = e2.eigenvalues, None, e2.critical
+    e.stability = e2.stability
+    e.reason = (f"classified in the {seq} sequence of the joint of '{where.link}' (the {where.sequence} angles are "
+                f"singular here: gimbal lock); {e2.reason}")
+    return True
+
+
+class _Unchartable(Exception):
+    """No regular chart is available for an equilibrium at a coordinate singularity."""
+
+
+def review(problem: EquilibriumProblem, equilibria: list[Equilibrium], p: np.ndarray) -> tuple[list[Equilibrium], str]:
+    """Equilibria at a singular point of a rotation chart: classified in a regular chart, or 'undecided' with the
+    reason; candidates that are no steady motion in a regular chart (artefacts of the singular one) are dropped.
+    Returns the equilibria kept and a note (empty when nothing happened)."""
+    kept, dropped, undecided = [], 0, 0
+    for e in equilibria:
+        found = singularities(problem.model, e.coordinates, p)
+        if not found:
+            kept.append(e)
+            continue
+        where = found[0]
+        try:
+            if not reclassify(problem, e, where, p):
+                dropped += 1
+                continue
+        except (_Unchartable, np.linalg.LinAlgError) as exc:
+            undecided += 1
+            e.eigenvalues, e.jacobian, e.critical = np.zeros(0, complex), None, False
+            e.stability = "undecided"
+            e.reason = f"{where.describe()}; {exc}: no verdict from this chart (write the joint with another " \
+                       f"sequence whose singular set avoids this orientation)"
+        kept.append(e)
+    notes = []
+    if dropped:
+        notes.append(f"{dropped} solution(s) at a gimbal-lock point are not steady motions in a regular chart "
+                     f"(artefacts of the singular angles) and are not listed")
+    if undecided:
+        notes.append(f"{undecided} equilibri{'um is' if undecided == 1 else 'a are'} at a coordinate singularity "
+                     f"and could not be classified")
+    return kept, "; ".join(notes)
