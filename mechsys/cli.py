@@ -371,7 +371,8 @@ def equilibria(
             reduced = bool(result.cyclic) or bool(model.kin.constraints)
             for k, e in enumerate(result.equilibria, start=1):
                 lin = linearize(model, e)
-                label = f"equilibrium {k}"
+                label = f"equilibrium {k}" + (" (coordinate singularity: the matrices of a singular chart; the "
+                                              "verdict is not read from them)" if e.chart else "")
                 J = e.jacobian if reduced else None
                 tables += (rep.linearization_tables(lin, label, hurwitz, J) if linearize_
                            else rep.hurwitz_tables(lin, label, J))

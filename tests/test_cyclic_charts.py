@@ -199,3 +199,44 @@ def test_simulate_from_a_gimbal_lock_names_the_chart_not_the_inertia(tmp_path):
     assert result.exit_code == 1
     assert "coordinate singularity: the zyx angles of the spherical joint of 'body'" in result.output
     assert "carries no mass" not in result.output
+
+
+TOP_ZXZ = """name: top_zxz
+parameters: {m: 1, l: 0.1, A: 0.002, C: 0.004, g: 9.81}
+coordinates:
+  psi: {initial: 0, rate: 0}
+  theta: {initial: 0.5, rate: 0}
+  phi: {initial: 0, rate: 60}
+links:
+  top:
+    joint: {type: spherical, parent: ground, sequence: zxz, coordinates: [psi, theta, phi]}
+    mass: m
+    center_of_mass: [0, 0, l]
+    inertia: {xx: A, yy: A, zz: C}
+forces:
+  - {type: gravity, acceleration: [0, 0, -g]}
+"""
+
+
+@pytest.mark.parametrize("factor", [0.95, 1.05])
+def test_sleeping_top_in_zxz_angles_is_classified_in_a_regular_chart(tmp_path, factor):
+    """theta = 0 is the zxz gimbal lock. Closed form: the upright top is stable iff C^2 w^2 > 4 A' m g l with A'
+    the transverse moment about the pivot (A + m l^2)."""
+    m, l, A, C, g = 1.0, 0.1, 0.002, 0.004, 9.81
+    critical = 2 * math.sqrt((A + m * l**2) * m * g * l) / C
+    path = _write(tmp_path, "top.yaml", TOP_ZXZ)
+    out = _json("equilibria", path, "--set", f"der(phi)={factor * critical}")
+    upright = next(e for e in out["equilibria"] if abs(e["coordinates"]["theta"]) < 1e-9)
+    assert upright["stability"] == ("stable" if factor > 1 else "unstable")
+    assert "classified in the" in upright["reason"] and "zxz angles are singular here" in upright["reason"]
+    assert sorted(_json("info", path)["cyclic"]) == ["phi", "psi"]
+
+
+def test_modes_never_linearize_in_a_singular_chart():
+    """Before: `modes` picked the gimbal-lock steady spin (the first stable one) and failed with 'the reduced mass
+    matrix is not positive definite'. Now it vibrates about a regular one, and --at a gimbal lock says why not."""
+    path = str(ROOT / "tests" / "data" / "torque_free_body.yaml")
+    out = runner.invoke(app, ["modes", path])
+    assert out.exit_code == 0 and "about theta = 0, phi = 0" in out.output
+    out = runner.invoke(app, ["modes", path, "--at", f"theta={math.pi / 2}"])
+    assert out.exit_code == 1 and "--at is at a coordinate singularity" in out.output

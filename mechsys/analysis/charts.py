@@ -148,6 +148,7 @@ def review(problem: EquilibriumProblem, equilibria: list[Equilibrium], p: np.nda
             kept.append(e)
             continue
         where = found[0]
+        e.chart = where.describe()
         try:
             if not reclassify(problem, e, where, p):
                 dropped += 1

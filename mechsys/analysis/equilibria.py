@@ -49,6 +49,7 @@ class Equilibrium:
     stability: str = "undecided"
     critical: bool = False
     reason: str = ""
+    chart: str = ""  # why the coordinates are a singular chart here ('' where they are regular): charts.py
 
     def to_dict(self) -> dict:
         return {

@@ -76,8 +76,12 @@ def _equilibrium(model: MechanicalModel, at: dict[str, float] | None) -> Equilib
         res = find_equilibria(model)
         if not res.equilibria:
             raise AnalysisError("no equilibrium found to vibrate about; give one with --at")
-        stable = [e for e in res.equilibria if e.stability in ("asymptotically stable", "stable")]
-        return (stable or res.equilibria)[0]
+        regular = [e for e in res.equilibria if not e.chart]
+        if not regular:
+            raise AnalysisError(f"every equilibrium found is at a {res.equilibria[0].chart}: the linearization in "
+                                "these coordinates is singular; write the joint with another sequence")
+        stable = [e for e in regular if e.stability in ("asymptotically stable", "stable")]
+        return (stable or regular)[0]
     problem = EquilibriumProblem(model)
     unknown = set(at) - set(problem.free) - set(problem.rate_unknowns)
     if unknown:
@@ -93,6 +97,12 @@ def _equilibrium(model: MechanicalModel, at: dict[str, float] | None) -> Equilib
     from mechsys.analysis.stability import assess
 
     e = problem.equilibrium(z)
+    from mechsys.analysis.charts import singularities
+
+    found = singularities(model, e.coordinates, p)
+    if found:
+        raise AnalysisError(f"--at is at a {found[0].describe()}: the linearization in these coordinates is "
+                            "singular; write the joint with another sequence")
     assess(problem, e, p)
     return e
 
