@@ -240,3 +240,33 @@ def test_modes_never_linearize_in_a_singular_chart():
     assert out.exit_code == 0 and "about theta = 0, phi = 0" in out.output
     out = runner.invoke(app, ["modes", path, "--at", f"theta={math.pi / 2}"])
     assert out.exit_code == 1 and "--at is at a coordinate singularity" in out.output
+
+
+def _zyx(psi: float, theta: float, phi: float) -> np.ndarray:
+    """Body -> ground rotation of the zyx sequence, written out here (independent of mechsys)."""
+    def rz(a):
+        return np.array([[math.cos(a), -math.sin(a), 0], [math.sin(a), math.cos(a), 0], [0, 0, 1]])
+
+    def ry(a):
+        return np.array([[math.cos(a), 0, math.sin(a)], [0, 1, 0], [-math.sin(a), 0, math.cos(a)]])
+
+    def rx(a):
+        return np.array([[1, 0, 0], [0, math.cos(a), -math.sin(a)], [0, math.sin(a), math.cos(a)]])
+    return rz(psi) @ ry(theta) @ rx(phi)
+
+
+def test_each_steady_spin_is_listed_once_whatever_the_chart_does():
+    """A torque-free body spinning about ground z has exactly six steady motions: a principal axis, either way
+    up, along ground z. The zyx chart reaches each orientation twice and the x-axis ones at a gimbal lock (a
+    continuum of angles there): before, 9 rows and a 'not isolated' note; now one row per steady motion, with
+    the intermediate-axis theorem's verdicts (Ix = 1 < Iy = 2 < Iz = 4)."""
+    out = _json("equilibria", str(ROOT / "tests" / "data" / "torque_free_body.yaml"))
+    axes = []
+    for e in out["equilibria"]:
+        n = _zyx(0.0, e["coordinates"]["theta"], e["coordinates"]["phi"]).T @ np.array([0, 0, 1.0])
+        k = int(np.argmax(np.abs(n)))
+        assert abs(abs(n[k]) - 1) < 1e-9
+        axes.append(("xyz"[k], int(np.sign(n[k]))))
+        assert e["stability"] == ("unstable" if k == 1 else "stable"), e
+    assert sorted(axes) == sorted((a, s) for a in "xyz" for s in (-1, 1))
+    assert "not isolated" not in out["message"]

@@ -3,13 +3,14 @@ motion found there is classified in a regular sequence of the same joint instead
 from __future__ import annotations
 
 import copy
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from mechsys.analysis.equilibria import Equilibrium, EquilibriumProblem, parameter_values
 from mechsys.numeric.lambdify import compile_exprs
-from mechsys.numeric.rotations import alternatives, angles_of, rate_matrix, ratio, rotation
+from mechsys.numeric.rotations import alternatives, angles_of, canonical, rate_matrix, ratio, rotation
 
 #: The chart is singular where the smallest singular value of the joint's map (angle rates -> angular velocity),
 #: relative to the largest, is below this.
@@ -83,10 +84,11 @@ def _chart_model(model, link: str, sequence: str):
     return memo[(link, sequence)]
 
 
-def reclassify(problem: EquilibriumProblem, e: Equilibrium, where: Singularity, p: np.ndarray) -> bool:
+def reclassify(problem: EquilibriumProblem, e: Equilibrium, where: Singularity, p: np.ndarray) -> tuple | None:
     """Classify ``e`` (found at a singular point of ``where``'s chart) in a regular sequence of the same joint.
-    True when it was classified there; False when it is not a steady motion there (an artefact of the singular
-    chart). Raises _Unchartable with the reason when no regular chart can be used."""
+    Returns the steady motion's identity there (sequence, rounded state): roots of the singular chart that are
+    one steady motion share it. None when it is not a steady motion there (an artefact of the singular chart).
+    Raises _Unchartable with the reason when no regular chart can be used."""
     from mechsys.analysis.stability import assess
 
     if where.sequence is None:
@@ -124,13 +126,41 @@ def reclassify(problem: EquilibriumProblem, e: Equilibrium, where: Singularity, 
     F, J = other.F(z, q2), other.J(z, q2)
     scale = max(1.0, float(np.max(np.abs(J)))) if J.size else 1.0
     if not np.all(np.isfinite(F)) or (F.size and np.max(np.abs(F)) > 1e-8 * scale):
-        return False
+        return None
     assess(other, e2, q2)
     e.eigenvalues, e.jacobian, e.critical = e2.eigenvalues, None, e2.critical
     e.stability = e2.stability
     e.reason = (f"classified in the {seq} sequence of the joint of '{where.link}' (the {where.sequence} angles are "
                 f"singular here: gimbal lock); {e2.reason}")
+    z = other.normalize(z)
+    return (where.link, seq) + tuple(round(float(x), 6) + 0.0 for x in z)
+
+
+def _conventional(problem: EquilibriumProblem, e: Equilibrium) -> bool:
+    for _j, names, sequence in rotation_joints(problem.model):
+        if sequence is not None and len(names) == 3:
+            a = [e.coordinates.get(n, 0.0) for n in names]
+            if any(abs(math.remainder(x - y, 2 * math.pi)) > 1e-9 for x, y in zip(a, canonical(sequence, a))):
+                return False
     return True
+
+
+def identity(problem: EquilibriumProblem, e: Equilibrium) -> tuple:
+    """What makes two roots one steady motion: each rotation joint's angles in their conventional triple (a
+    sequence reaches every orientation twice), then the other unknowns, rounded."""
+    values = dict(e.coordinates)
+    for _j, names, sequence in rotation_joints(problem.model):
+        if sequence is not None and len(names) == 3:
+            values.update(zip(names, canonical(sequence, [values.get(n, 0.0) for n in names])))
+
+    def key(x: float, angle: bool) -> float:
+        x = float(x)
+        if angle:
+            x = math.remainder(x, 2 * math.pi)
+            x = math.pi if abs(x + math.pi) < 1e-7 else x
+        return round(x, 6) + 0.0
+    return (("regular",) + tuple(key(values[c], problem.angles.get(c, False)) for c in problem.free)
+            + tuple(key(e.rates[c], False) for c in sorted(e.rates)))
 
 
 class _Unchartable(Exception):
@@ -141,18 +171,27 @@ def review(problem: EquilibriumProblem, equilibria: list[Equilibrium], p: np.nda
     """Equilibria at a singular point of a rotation chart: classified in a regular chart, or 'undecided' with the
     reason; candidates that are no steady motion in a regular chart (artefacts of the singular one) are dropped.
     Returns the equilibria kept and a note (empty when nothing happened)."""
-    kept, dropped, undecided = [], 0, 0
+    kept, dropped, undecided, seen, first = [], 0, 0, set(), {}
     for e in equilibria:
         found = singularities(problem.model, e.coordinates, p)
         if not found:
-            kept.append(e)
+            same = identity(problem, e)
+            if same not in first:  # (psi, theta, phi) and (psi + pi, pi - theta, phi + pi) are one orientation
+                first[same] = len(kept)
+                kept.append(e)
+            elif _conventional(problem, e) and not _conventional(problem, kept[first[same]]):
+                kept[first[same]] = e  # show the conventional angles (e.g. |theta| <= pi/2 for zyx)
             continue
         where = found[0]
         e.chart = where.describe()
         try:
-            if not reclassify(problem, e, where, p):
+            recharted = reclassify(problem, e, where, p)
+            if recharted is None:
                 dropped += 1
                 continue
+            if recharted in seen:
+                continue  # the same steady motion, reached at another point of the singular chart's continuum
+            seen.add(recharted)
         except (_Unchartable, np.linalg.LinAlgError) as exc:
             undecided += 1
             e.eigenvalues, e.jacobian, e.critical = np.zeros(0, complex), None, False

@@ -503,16 +503,18 @@ def find_equilibria(model: MechanicalModel, search: dict[str, tuple[float, float
         return _every_state(problem, p, search)
     plan = search_plan(problem, search, starts)
     roots = solve_equilibria(problem, p, search, starts, seed, plan)
+    from mechsys.analysis.charts import review, singularities
+
     message = ""
     isolated = []
     family = None
     for z in roots:
         J = problem.J(z, p)
         sv = np.linalg.svd(J, compute_uv=False) if J.size else np.zeros(0)
-        if sv.size and sv[-1] <= 1e-9 * max(1.0, sv[0]):
+        if sv.size and sv[-1] <= 1e-9 * max(1.0, sv[0]) and not singularities(model, problem.equilibrium(z).coordinates, p):
             family = family if family is not None else z  # not isolated: one representative of the continuum
         else:
-            isolated.append(z)
+            isolated.append(z)  # (at a gimbal lock the chart, not the physics, makes roots a continuum: charts.py)
     if family is not None:
         isolated.append(family)
         message = ("the equilibria are not isolated (singular Jacobian: e.g. a free rigid-body motion); "
@@ -520,8 +522,6 @@ def find_equilibria(model: MechanicalModel, search: dict[str, tuple[float, float
     equilibria = [problem.equilibrium(z) for z in isolated]
     for e in equilibria:
         assess(problem, e, p)
-    from mechsys.analysis.charts import review
-
     equilibria, chart_note = review(problem, equilibria, p)
     message = "; ".join(m for m in (message, chart_note) if m)
     equilibria.sort(key=lambda e: tuple(e.coordinates.values()) + tuple(e.rates.values()))

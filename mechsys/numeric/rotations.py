@@ -50,8 +50,23 @@ def angles_of(sequence: str, R: np.ndarray) -> np.ndarray | None:
         sol = least_squares(lambda a: (rotation(sequence, a) - R).ravel(), np.array(start), xtol=1e-15,
                             ftol=1e-15, gtol=1e-15)
         if np.max(np.abs(rotation(sequence, sol.x) - R)) < 1e-12:
-            return np.remainder(sol.x + np.pi, 2 * np.pi) - np.pi
+            return canonical(sequence, sol.x)
     return None
+
+
+def _wrap(a) -> np.ndarray:
+    return np.remainder(np.asarray(a, dtype=float) + np.pi, 2 * np.pi) - np.pi
+
+
+def canonical(sequence: str, a) -> np.ndarray:
+    """The one of the two angle triples of a rotation that is conventional: middle angle in [-pi/2, pi/2] for
+    Cardan sequences (xyz), in [0, pi] for proper Euler ones (zxz); the others in (-pi, pi]. The alternative is
+    (a1 + pi, pi - a2, a3 + pi) for Cardan and (a1 + pi, -a2, a3 + pi) for Euler sequences."""
+    a = _wrap(a)
+    euler = sequence[0] == sequence[2]
+    if (euler and a[1] < 0) or (not euler and abs(a[1]) > np.pi / 2):
+        a = _wrap([a[0] + np.pi, -a[1] if euler else np.pi - a[1], a[2] + np.pi])
+    return a
 
 
 def alternatives(sequence: str) -> list[str]:
