@@ -334,6 +334,9 @@ def equilibria(
     numeric: bool = typer.Option(False, "--numeric", help="With --linearize: numbers at each equilibrium "
                                                           "(default: expressions, then numbers)."),
     hurwitz: bool = typer.Option(False, "--hurwitz", help="Characteristic polynomial and Routh-Hurwitz conditions."),
+    verify: bool = typer.Option(False, "--verify", help="Integrate from small perturbations of each equilibrium and "
+                                                        "check the verdicts against the motion (exit 1 if one "
+                                                        "disagrees)."),
     fmt: TableFormat = typer.Option(TableFormat.text, "--format", "-f", help="Output format."),
     set_: Optional[List[str]] = SetOption,
     output: Optional[Path] = OutputOption,
@@ -348,11 +351,20 @@ def equilibria(
         sweep_spec = parse_ranges([sweep_], "--sweep", count=True) if sweep_ else {}
         if plot is not None and not sweep_spec:
             raise InputError("--plot needs --sweep")
+        if verify and sweep_spec:
+            raise InputError("--verify cannot be combined with --sweep (verify the equilibria at one parameter value)")
         check_figures(plot=plot)
         check_outputs(output)
         model = load_model(file, set_)
         result = find_equilibria(model, boxes)
         tables = rep.equilibria_tables(result)
+        verifications, failed = None, []
+        if verify:
+            from mechsys.analysis.verify import disagreements, verify_equilibria
+
+            verifications = verify_equilibria(model, result)
+            failed = disagreements(result, verifications)
+            tables.append(rep.verification_table(result, verifications))
         bifurcations: list = []
         if sweep_spec:
             from mechsys.analysis.bifurcation import plot_sweep, sweep
@@ -376,13 +388,15 @@ def equilibria(
                 J = e.jacobian if reduced else None
                 tables += (rep.linearization_tables(lin, label, hurwitz, J) if linearize_
                            else rep.hurwitz_tables(lin, label, J))
-        payload = rep.equilibria_payload(result, bifurcations)
+        payload = rep.equilibria_payload(result, bifurcations, verifications)
         if sweep_spec and fmt == TableFormat.csv:
             branch_table = [t for t in tables if t.title.startswith("branches")]
             emit_tables(branch_table, fmt, output)
         else:
             emit_tables(tables, fmt, output, payload)
-        return 0
+        for line in failed:
+            sys.stderr.write(f"mechsys: verification disagrees: {line}\n")
+        return 1 if failed else 0
 
     run(body)
 

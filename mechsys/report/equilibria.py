@@ -46,7 +46,29 @@ def equilibria_tables(result: EquilibriaResult) -> list[Table]:
     return [t, modes, reasons]
 
 
-def equilibria_payload(result: EquilibriaResult, bifurcations: list | None = None) -> dict:
+def verification_table(result: EquilibriaResult, verifications: list) -> Table:
+    """--verify: the motion from small perturbations of each equilibrium against its verdict (analysis/verify.py);
+    a disagreement is a note in capitals that names the equilibrium, the verdict and the motion."""
+    from mechsys.analysis.verify import disagreements
+
+    t = Table("verification (perturbed motions)", ["#", "stability", "perturbed motion", "agrees"])
+    for k, v in enumerate(verifications, start=1):
+        t.add(k, v.stability, v.summary(), {True: "yes", False: "NO", None: "-"}[v.agrees])
+    t.notes += [f"DISAGREEMENT: {line}" for line in disagreements(result, verifications)]
+    t.notes += [f"{k}: {v.note}" for k, v in enumerate(verifications, start=1) if v.note and v.agrees is not False]
+    if verifications:
+        runs, size = max(len(v.runs) for v in verifications), verifications[0].size
+        t.notes.append(f"{runs} runs per equilibrium from perturbations of scaled size {size:g}; the factor is the "
+                       "deviation at the end relative to the initial one (for grows: the largest)")
+    return t
+
+
+def equilibria_payload(result: EquilibriaResult, bifurcations: list | None = None,
+                       verifications: list | None = None) -> dict:
+    if verifications is not None:
+        return {**equilibria_payload(result, bifurcations),
+                "equilibria": [{**e.to_dict(), "verification": v.to_dict()}
+                               for e, v in zip(result.equilibria, verifications)]}
     return {"equilibria": [e.to_dict() for e in result.equilibria], "bifurcations": bifurcations or [],
             "message": result.message, "cyclic": result.cyclic,
             "search": result.search.to_dict() if result.search is not None else None}
