@@ -270,3 +270,41 @@ def test_each_steady_spin_is_listed_once_whatever_the_chart_does():
         assert e["stability"] == ("unstable" if k == 1 else "stable"), e
     assert sorted(axes) == sorted((a, s) for a in "xyz" for s in (-1, 1))
     assert "not isolated" not in out["message"]
+
+
+ELASTIC = """name: elastic_spherical_pendulum
+parameters: {m: 1, k: 100, L0: 1, g: 9.81, w: 4}
+coordinates:
+  az: {initial: 0, rate: w}
+  pol: {initial: 0.5, rate: 0}
+  r: {initial: 1.1, rate: 0}
+links:
+  gimbal:
+    joint: {type: universal, parent: ground, axes: [z, y], coordinates: [az, pol]}
+  bob:
+    particle: true
+    joint: {type: prismatic, parent: gimbal, axis: -z, coordinate: r}
+    mass: m
+forces:
+  - {type: gravity, acceleration: [0, 0, -g]}
+  - {type: spring, between: [gimbal.origin, bob.origin], stiffness: k, free_length: L0}
+"""
+
+
+def test_elastic_spherical_pendulum_azimuth_and_its_steady_motions(tmp_path):
+    """The azimuth of a particle on a universal joint is cyclic (cos^2 + sin^2 in T). At az' = 4: the conical
+    motion r = k L0/(k - m w^2), cos(pol) = g/(w^2 r), once (pol and -pol, or -r, are the same motion); on the
+    axis (hanging, upright) the azimuth moves no mass: a coordinate singularity, not a verdict."""
+    path = _write(tmp_path, "elastic.yaml", ELASTIC)
+    assert _json("info", path)["cyclic_basis"] == {"az": "symbolic"}
+    out = _json("equilibria", path)
+    m, k, L0, g, w = 1.0, 100.0, 1.0, 9.81, 4.0
+    conical = [e for e in out["equilibria"] if 0.1 < abs(e["coordinates"]["pol"]) < 3.0]
+    assert len(conical) == 1 and conical[0]["stability"] == "stable"
+    r = k * L0 / (k - m * w**2)
+    assert conical[0]["coordinates"]["r"] == pytest.approx(r, rel=1e-10)
+    assert math.cos(conical[0]["coordinates"]["pol"]) == pytest.approx(g / (w**2 * r), rel=1e-10)
+    on_axis = [e for e in out["equilibria"] if e not in conical]
+    assert sorted(round(e["coordinates"]["r"], 6) for e in on_axis) == [round(L0 - m * g / k, 6), round(L0 + m * g / k, 6)]
+    assert all(e["stability"] == "undecided" and e["reason"].startswith("coordinate singularity: az moves no mass")
+               for e in on_axis)

@@ -3,6 +3,7 @@ motion found there is classified in a regular sequence of the same joint instead
 from __future__ import annotations
 
 import copy
+import itertools
 import math
 from dataclasses import dataclass
 
@@ -136,31 +137,54 @@ def reclassify(problem: EquilibriumProblem, e: Equilibrium, where: Singularity, 
     return (where.link, seq) + tuple(round(float(x), 6) + 0.0 for x in z)
 
 
+def _state_fn(model):
+    """Compiled physical state of every massive link at (q, u): centre-of-mass position and velocity in ground
+    axes, and for rigid bodies the orientation and the angular velocity (ground axes). Two roots with the same
+    physical state are one steady motion, whatever coordinates describe it."""
+    memo = model.__dict__.setdefault("_chart_memo", {})
+    if "state" not in memo:
+        import sympy as sp
+
+        parts = []
+        for body, r, _v, w, frame in model._body_kinematics:
+            parts += list(r) + list(model.velocity(r))
+            if not body.particle:
+                parts += list(frame.R) + list(frame.R * w)
+        args = list(model.q) + list(model.u) + list(model.parameter_symbols) + [model.t]
+        memo["state"] = compile_exprs([sp.sympify(x) for x in parts], args)
+    return memo["state"]
+
+
+def _physical(problem: EquilibriumProblem, e: Equilibrium, p: np.ndarray, shift: dict[str, float]) -> np.ndarray:
+    model = problem.model
+    q = [e.coordinates.get(c, 0.0) + shift.get(c, 0.0) for c in model.coordinates]
+    u = [e.rates.get(c, 0.0) for c in model.coordinates]
+    return np.array(_state_fn(model)(*q, *u, *p, 0.0), dtype=float)
+
+
+def same_motion(problem: EquilibriumProblem, a: Equilibrium, b: Equilibrium, p: np.ndarray) -> bool:
+    """``a`` and ``b`` are one steady motion: the same physical state of every massive link, up to a half turn of
+    each cyclic angle (a rotation sequence reaches every orientation twice, (psi, theta, phi) and
+    (psi + pi, pi - theta, phi + pi); a prismatic coordinate along a turning axis reaches each point twice)."""
+    if any(abs(a.rates.get(c, 0.0) - b.rates.get(c, 0.0)) > 1e-7 * (1 + abs(a.rates.get(c, 0.0))) for c in a.rates):
+        return False
+    ref = _physical(problem, a, p, {})
+    tol = 1e-7 * (1.0 + float(np.max(np.abs(ref)))) if ref.size else 1e-7
+    turning = [c for c in problem.cyclic if problem.angles.get(c, False)][:3]
+    for halves in itertools.product((0.0, math.pi), repeat=len(turning)):
+        if np.max(np.abs(_physical(problem, b, p, dict(zip(turning, halves))) - ref), initial=0.0) <= tol:
+            return True
+    return False
+
+
 def _conventional(problem: EquilibriumProblem, e: Equilibrium) -> bool:
+    """Rotation angles in their conventional triple, and no negative prismatic coordinate (display preference)."""
     for _j, names, sequence in rotation_joints(problem.model):
         if sequence is not None and len(names) == 3:
             a = [e.coordinates.get(n, 0.0) for n in names]
             if any(abs(math.remainder(x - y, 2 * math.pi)) > 1e-9 for x, y in zip(a, canonical(sequence, a))):
                 return False
-    return True
-
-
-def identity(problem: EquilibriumProblem, e: Equilibrium) -> tuple:
-    """What makes two roots one steady motion: each rotation joint's angles in their conventional triple (a
-    sequence reaches every orientation twice), then the other unknowns, rounded."""
-    values = dict(e.coordinates)
-    for _j, names, sequence in rotation_joints(problem.model):
-        if sequence is not None and len(names) == 3:
-            values.update(zip(names, canonical(sequence, [values.get(n, 0.0) for n in names])))
-
-    def key(x: float, angle: bool) -> float:
-        x = float(x)
-        if angle:
-            x = math.remainder(x, 2 * math.pi)
-            x = math.pi if abs(x + math.pi) < 1e-7 else x
-        return round(x, 6) + 0.0
-    return (("regular",) + tuple(key(values[c], problem.angles.get(c, False)) for c in problem.free)
-            + tuple(key(e.rates[c], False) for c in sorted(e.rates)))
+    return all(v >= 0 or problem.angles.get(c, False) for c, v in e.coordinates.items())
 
 
 class _Unchartable(Exception):
@@ -171,16 +195,16 @@ def review(problem: EquilibriumProblem, equilibria: list[Equilibrium], p: np.nda
     """Equilibria at a singular point of a rotation chart: classified in a regular chart, or 'undecided' with the
     reason; candidates that are no steady motion in a regular chart (artefacts of the singular one) are dropped.
     Returns the equilibria kept and a note (empty when nothing happened)."""
-    kept, dropped, undecided, seen, first = [], 0, 0, set(), {}
+    kept, dropped, undecided, seen, regular = [], 0, 0, set(), []
     for e in equilibria:
         found = singularities(problem.model, e.coordinates, p)
         if not found:
-            same = identity(problem, e)
-            if same not in first:  # (psi, theta, phi) and (psi + pi, pi - theta, phi + pi) are one orientation
-                first[same] = len(kept)
+            k = next((i for i in regular if same_motion(problem, kept[i], e, p)), None)
+            if k is None:
+                regular.append(len(kept))
                 kept.append(e)
-            elif _conventional(problem, e) and not _conventional(problem, kept[first[same]]):
-                kept[first[same]] = e  # show the conventional angles (e.g. |theta| <= pi/2 for zyx)
+            elif _conventional(problem, e) and not _conventional(problem, kept[k]):
+                kept[k] = e  # show the conventional coordinates (e.g. |theta| <= pi/2 for zyx, r >= 0)
             continue
         where = found[0]
         e.chart = where.describe()

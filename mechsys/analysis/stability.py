@@ -88,6 +88,20 @@ def massless_coordinates(problem, e) -> list[str]:
     return [c for i, c in enumerate(model.coordinates) if np.max(np.abs(M[i, :])) <= 1e-12 * scale]
 
 
+def _massive_elsewhere(problem, names: list[str], p: np.ndarray) -> bool:
+    """Each of ``names`` carries mass at random configurations (so its masslessness here is the chart's)."""
+    from mechsys.analysis.crosscheck import random_states
+
+    model = problem.model
+    ev = pieces(model)
+    for t, q, u in random_states(model, 3, seed=13):
+        M = ev.evaluate(q, u, np.zeros(problem.m), p)["M"]
+        scale = max(1e-300, float(np.max(np.abs(M))))
+        if all(abs(M[model.coordinates.index(c), model.coordinates.index(c)]) > 1e-9 * scale for c in names):
+            return True
+    return False
+
+
 def assess(problem, e, p: np.ndarray) -> None:
     """Fill eigenvalues, Jacobian and verdict of equilibrium ``e`` in place."""
     problem.current_parameters = p
@@ -99,6 +113,14 @@ def assess(problem, e, p: np.ndarray) -> None:
         e.eigenvalues, e.jacobian, e.critical = np.zeros(0, complex), None, False
         e.stability = "undecided"
         them = "it" if len(names) == 1 else "them"
+        if names and _massive_elsewhere(problem, names, p):
+            one = len(names) == 1
+            e.reason = (f"coordinate singularity: {', '.join(names)} move{'s' if one else ''} no mass at this "
+                        f"configuration but {'does' if one else 'do'} elsewhere (e.g. a particle on the axis of its "
+                        f"own azimuth): "
+                        f"the coordinates are a singular chart here and no verdict is read from them; write the "
+                        f"joint so that this position is regular (another axis order or sequence)")
+            return
         e.reason = (f"the linearized equations do not determine the motion: {who} and no stiffness or damping "
                     f"acts on {them} (a singular pencil); give {them} mass or inertia, or make {them} prescribed")
         return
