@@ -89,15 +89,21 @@ def massless_coordinates(problem, e) -> list[str]:
 
 
 def _massive_elsewhere(problem, names: list[str], p: np.ndarray) -> bool:
-    """Each of ``names`` carries mass at random configurations (so its masslessness here is the chart's)."""
+    """Each of ``names`` (or, with none named, every combination of the coordinates) carries mass at a random
+    configuration: its masslessness here is the chart's, not the model's."""
     from mechsys.analysis.crosscheck import random_states
 
     model = problem.model
+    if problem.m:
+        return False  # with constraints a singular pencil may be the loop's own (a dead centre), not the chart's
     ev = pieces(model)
     for t, q, u in random_states(model, 3, seed=13):
         M = ev.evaluate(q, u, np.zeros(problem.m), p)["M"]
         scale = max(1e-300, float(np.max(np.abs(M))))
-        if all(abs(M[model.coordinates.index(c), model.coordinates.index(c)]) > 1e-9 * scale for c in names):
+        if names and all(abs(M[model.coordinates.index(c), model.coordinates.index(c)]) > 1e-9 * scale
+                         for c in names):
+            return True
+        if not names and M.size and np.linalg.svd(M, compute_uv=False)[-1] > 1e-9 * scale:
             return True
     return False
 
@@ -113,11 +119,14 @@ def assess(problem, e, p: np.ndarray) -> None:
         e.eigenvalues, e.jacobian, e.critical = np.zeros(0, complex), None, False
         e.stability = "undecided"
         them = "it" if len(names) == 1 else "them"
-        if names and _massive_elsewhere(problem, names, p):
+        if _massive_elsewhere(problem, names, p):
             one = len(names) == 1
-            e.reason = (f"coordinate singularity: {', '.join(names)} move{'s' if one else ''} no mass at this "
-                        f"configuration but {'does' if one else 'do'} elsewhere (e.g. a particle on the axis of its "
-                        f"own azimuth): "
+            what = (f"{', '.join(names)} move{'s' if one else ''} no mass at this configuration but "
+                    f"{'does' if one else 'do'} elsewhere (e.g. a particle on the axis of its own azimuth)" if names
+                    else "a combination of the coordinates moves no mass at this configuration, while the mass "
+                         "matrix is regular elsewhere (e.g. a gimbal of revolute joints whose first and last "
+                         "axes line up)")
+            e.reason = (f"coordinate singularity: {what}: "
                         f"the coordinates are a singular chart here and no verdict is read from them; write the "
                         f"joint so that this position is regular (another axis order or sequence)")
             return
