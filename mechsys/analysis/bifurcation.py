@@ -1,7 +1,9 @@
 """Equilibrium branches of a model as one parameter varies: continuation, stability and bifurcation points."""
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
+from typing import Callable
 
 import numpy as np
 import sympy as sp
@@ -11,6 +13,7 @@ from mechsys.analysis.equilibria import EquilibriumProblem, parameter_values, so
 from mechsys.analysis.stability import ZERO_RE, assess, eigen, reduced_pencil
 from mechsys.errors import AnalysisError, InputError
 from mechsys.mechanics.model import MechanicalModel
+from mechsys.numeric.lambdify import compile_exprs
 
 
 @dataclass
@@ -32,8 +35,8 @@ class SweepResult:
         return out
 
 
-def parameter_sensitivity(model: MechanicalModel, name: str):
-    """d(parameter vector)/d(name): derived parameters follow the swept one (exact, from their expressions)."""
+def _dependence(model: MechanicalModel, name: str) -> tuple[sp.Symbol, dict[sp.Symbol, sp.Expr]]:
+    """The swept parameter's symbol and every parameter as an expression of it (derived ones follow it)."""
     doc = model.doc
     if name not in doc.parameters:
         raise InputError(f"--sweep {name}: unknown parameter{doc.suggest(name, list(doc.parameters))}")
@@ -42,6 +45,13 @@ def parameter_sensitivity(model: MechanicalModel, name: str):
     for pname, expr in doc.parameter_exprs.items():
         sym = doc.parameters[pname]
         full[sym] = base if pname == name else expr.xreplace(full)
+    return base, full
+
+
+def parameter_sensitivity(model: MechanicalModel, name: str):
+    """d(parameter vector)/d(name): derived parameters follow the swept one (exact, from their expressions)."""
+    doc = model.doc
+    base, full = _dependence(model, name)
     derivs = [sp.diff(full[s], base) for s in model.parameter_symbols]
 
     def at(values: dict[str, float]) -> np.ndarray:
@@ -51,62 +61,194 @@ def parameter_sensitivity(model: MechanicalModel, name: str):
     return at
 
 
+def _given_rates(problem: EquilibriumProblem) -> list[sp.Expr]:
+    """The given rates of the families of steady motions as expressions of the parameters (the file's ``rate:``),
+    or as numbers where the model's rate no longer is that expression's value (set after loading)."""
+    model = problem.model
+    doc = model.doc
+    nominal = {s: sp.Float(v) for s, v in zip(model.parameter_symbols, parameter_values(model))}
+    out: list[sp.Expr] = []
+    for c in problem.fixed_rates:
+        value = doc.initial_rate[c]  # the model's, not the problem's (a sweep moves those)
+        expr: sp.Expr = sp.Float(value)
+        spec = doc.spec.coordinates.get(c)
+        if spec is not None and spec.prescribed is None:
+            try:
+                given = doc.parse(spec.rate, ("coordinates", c, "rate"), "initial")
+                if abs(float(sp.sympify(given).xreplace(nominal).evalf()) - value) <= 1e-12 * (1.0 + abs(value)):
+                    expr = given
+            except (InputError, TypeError, ValueError):
+                pass
+        out.append(expr)
+    return out
+
+
+@dataclass
+class SweptParameter:
+    """What ``--sweep NAME`` varies: a parameter (the parameters defined from it and the given rates of families
+    of steady motions whose ``rate:`` uses it follow it), or ``der(NAME)``, the given rate of a family of steady
+    motions of the cyclic coordinate NAME. ``at(p)`` puts the problem there (its given rates, and the parameters
+    the stability tests read) and returns the parameter vector P. The derivatives take (p, P)."""
+
+    name: str
+    problem: EquilibriumProblem
+    pvec: Callable[[float], np.ndarray]
+    dpvec: Callable[[float, np.ndarray], np.ndarray]
+    rates: Callable[[float, np.ndarray], np.ndarray]   # the given rates, problem.fixed_rates order
+    drates: Callable[[float, np.ndarray], np.ndarray]
+
+    def at(self, p: float) -> np.ndarray:
+        P = self.pvec(p)
+        fixed = self.problem.fixed_rates
+        fixed.update(zip(list(fixed), (float(r) for r in self.rates(p, P))))
+        self.problem.current_parameters = P
+        return P
+
+    def Fp(self, z: np.ndarray, p: float) -> np.ndarray:
+        P = self.at(p)
+        out = self.problem.Fp(z, P) @ self.dpvec(p, P)
+        dr = self.drates(p, P)
+        if np.any(dr):
+            out = out + self.problem.Fr(z, P) @ dr
+        return out
+
+
+_RATE = re.compile(r"der\(\s*([A-Za-z_][A-Za-z_0-9]*)\s*\)")
+
+
+def swept_parameter(problem: EquilibriumProblem, name: str) -> SweptParameter:
+    """The continuation parameter named by ``--sweep NAME`` (InputError when it cannot be one)."""
+    model = problem.model
+    m = _RATE.fullmatch(name.strip())
+    if m:
+        return _rate_parameter(problem, m.group(1))
+    base, full = _dependence(model, name)
+    sens = parameter_sensitivity(model, name)
+    syms = model.parameter_symbols
+    names = [s.name for s in syms]
+    exprs = _given_rates(problem)
+    value = compile_exprs(exprs, syms) if exprs else None
+    slope = [sp.diff(sp.sympify(e).xreplace(full), base) for e in exprs]
+    dvalue = compile_exprs(slope, syms) if any(d != 0 for d in slope) else None
+    memo: dict[float, np.ndarray] = {}
+
+    def pvec(p: float) -> np.ndarray:
+        if p not in memo:  # one entry: F, J, dF/dp and the eigenvalues of one point share it
+            memo.clear()
+            memo[p] = parameter_values(model, {name: p})
+        return memo[p]
+
+    return SweptParameter(name, problem, pvec, lambda p, P: sens(dict(zip(names, P))),
+                          lambda p, P: np.array(value(*P) if value else [], dtype=float),
+                          lambda p, P: np.array(dvalue(*P), dtype=float) if dvalue else np.zeros(len(exprs)))
+
+
+def _rate_parameter(problem: EquilibriumProblem, coord: str) -> SweptParameter:
+    """der(coord) swept: allowed only for the given rate of a family of steady motions."""
+    model = problem.model
+    name = f"der({coord})"
+    if coord not in model.coordinates:
+        raise InputError(f"--sweep {name}: unknown coordinate{model.doc.suggest(coord, model.coordinates)}")
+    if coord in problem.rate_unknowns:
+        raise InputError(f"--sweep {name}: the steady rate of the cyclic coordinate {coord} is an unknown that the "
+                         f"equations of the steady motions fix (a generalized force acts on {coord} at rest, e.g. a "
+                         "motor's torque balance), not a parameter; sweep a parameter of that force instead")
+    if coord not in problem.fixed_rates:
+        why = " (no coordinate of a constrained system is treated as cyclic)" if model.kin.constraints else ""
+        raise InputError(f"--sweep {name}: {coord} is not a cyclic coordinate{why}, so its rate is zero at every "
+                         "equilibrium; only the given rate of a family of steady motions of a cyclic coordinate "
+                         "can be swept")
+    k = list(problem.fixed_rates).index(coord)
+    P = parameter_values(model)
+    base = np.array([model.doc.initial_rate[c] for c in problem.fixed_rates], dtype=float)
+    unit = np.zeros(len(base))
+    unit[k] = 1.0
+
+    def given(p: float, P: np.ndarray) -> np.ndarray:
+        out = base.copy()
+        out[k] = p
+        return out
+
+    return SweptParameter(name, problem, lambda p: P, lambda p, P: np.zeros(len(P)), given, lambda p, P: unit)
+
+
 def sweep(model: MechanicalModel, name: str, start: float, stop: float, points: int = 101,
           search: dict | None = None) -> SweepResult:
     """Follow every equilibrium branch found at the ends and the middle of [start, stop] by pseudo-arclength
-    continuation; stability from the eigenvalues; folds, branch points and Hopf points located on the way."""
+    continuation; stability from the eigenvalues; folds, branch points, Hopf points and eigenvalue collisions on
+    the imaginary axis located on the way. NAME is a parameter or der(NAME) of a family of steady motions."""
     if start == stop:
         raise InputError(f"--sweep {name}: START and STOP must differ")
     problem = EquilibriumProblem(model)
-    sens = parameter_sensitivity(model, name)
+    par = swept_parameter(problem, name)
+    name = par.name  # der(NAME) spelled without spaces
     lo, hi = min(start, stop), max(start, stop)
-
-    def pvec(p: float) -> np.ndarray:
-        return parameter_values(model, {name: p})
 
     rows: list[int] | slice = slice(None)  # the equations continued on (a square system), chosen below
 
     def F(z, p):
-        return problem.F(z, pvec(p))[rows]
+        return problem.F(z, par.at(p))[rows]
 
     def Fx(z, p):
-        return problem.J(z, pvec(p))[rows]
+        return problem.J(z, par.at(p))[rows]
 
     def Fp(z, p):
-        values = dict(zip([s.name for s in model.parameter_symbols], pvec(p)))
-        return (problem.Fp(z, pvec(p)) @ sens(values))[rows]
+        return par.Fp(z, p)[rows]
 
     def eig(z, p):
-        problem.current_parameters = pvec(p)
+        par.at(p)
         A, B, _ = reduced_pencil(problem, problem.equilibrium(z))
         return eigen(A, B)[0]
 
     starts = []
+    undefined = []
     for p in np.linspace(lo, hi, 5):  # branches born inside the range need a start of their own
-        for z in solve_equilibria(problem, pvec(p), search):
-            starts.append((z, float(p)))
+        try:
+            starts += [(z, float(p)) for z in solve_equilibria(problem, par.at(p), search)]
+        except (ValueError, ArithmeticError) as exc:  # e.g. sqrt of a negative parameter: math domain error
+            undefined.append(f"{name} = {p:g} ({exc})")
     span = hi - lo if hi > lo else 1.0
     step = span / max(points - 1, 1)
     if starts:
-        rows = _independent_rows(problem.J(starts[0][0], pvec(starts[0][1])))
+        rows = _independent_rows(problem.J(starts[0][0], par.at(starts[0][1])))
+
+    def smooth(z: np.ndarray, p: float) -> bool:
+        try:
+            return all(bool(np.all(np.isfinite(v))) for v in (F(z, p), Fx(z, p), Fp(z, p)))
+        except (ValueError, ArithmeticError):
+            return False
+
+    keep = [smooth(z, p) for z, p in starts]  # not smooth: e.g. d sqrt(mu)/d mu at mu = 0
+    undefined += [f"{name} = {p:g} (the derivatives of the equations are not finite there)"
+                  for p in sorted({p for (_, p), ok in zip(starts, keep) if not ok})]
+    starts = [st for st, ok in zip(starts, keep) if ok]
     # the step limit grows with the points asked for (a branch needs at least points - 1 steps to cross the range)
     try:
         branches = sweep_parameter(F, Fx, Fp, starts, lo, hi, eig, ds=step / 2,
                                    ds_max=min(step, 0.2 * max(span, 1.0)), tol_re=ZERO_RE * 10,
                                    max_steps=max(2000, 20 * points)) if starts else []
-    except ValueError as exc:
+    except (ValueError, ArithmeticError) as exc:
         raise AnalysisError(f"--sweep {name}: {exc}") from None
-    _check_all_equations(problem, branches, pvec, name)
-    _point_verdicts(problem, branches, pvec)
+    _check_all_equations(problem, branches, par.at, name)
+    _point_verdicts(problem, branches, par.at)
     nreport = len(problem.free) + len(problem.rate_unknowns)
     names = list(problem.free) + [f"der({c})" for c in problem.rate_unknowns]
     angles = [problem.angles.get(c, False) for c in problem.free] + [False] * len(problem.rate_unknowns)
     result = SweepResult(name, names, angles, branches)
+    if undefined:
+        result.notes.append(f"the equations cannot be evaluated at {', '.join(undefined)}: no branch starts there")
     cut = [k for k, branch in enumerate(branches, start=1) if branch.truncated]
     if cut:
         result.notes.append(f"branch(es) {', '.join(map(str, cut))} ended at the step limit ({max(2000, 20 * points)} "
                             "steps) inside the range: they are incomplete, and a start found on their untraced part "
                             "may appear as a further branch (use fewer points or a narrower range)")
+    for k, branch in enumerate(branches, start=1):
+        inside = [v for v in branch.stalled if lo < v < hi]
+        if inside:
+            where = " and ".join(f"{name} = {v:.6g}" for v in inside)
+            result.notes.append(f"branch {k} ends inside the range at {where}: the Newton corrector did not converge "
+                                "even with the smallest step, so the continuation cannot pass that point "
+                                "(the equations are not smooth or not defined beyond it)")
     events = []
     for branch in branches:
         for bif in branch.bifurcations:
@@ -130,12 +272,13 @@ def _independent_rows(J: np.ndarray) -> list[int]:
     return sorted(int(k) for k in pivots[:n])
 
 
-def _check_all_equations(problem: EquilibriumProblem, branches: list[Branch], pvec, name: str) -> None:
+def _check_all_equations(problem: EquilibriumProblem, branches: list[Branch], at, name: str) -> None:
     """Every continued point must satisfy ALL equilibrium equations, not only the ones continuation solved."""
     for k, branch in enumerate(branches, start=1):
         for pt in branch.points:
-            F = problem.F(pt.x, pvec(pt.p))
-            scale = 1.0 + float(np.max(np.abs(problem.J(pt.x, pvec(pt.p))), initial=0.0))
+            P = at(pt.p)
+            F = problem.F(pt.x, P)
+            scale = 1.0 + float(np.max(np.abs(problem.J(pt.x, P)), initial=0.0))
             if not np.all(np.isfinite(F)) or float(np.max(np.abs(F), initial=0.0)) > 1e-6 * scale:
                 raise AnalysisError(f"--sweep {name}: on branch {k} at {name} = {pt.p:g} the equilibrium equations "
                                     f"do not all hold (residual {float(np.max(np.abs(F))):.3g}): the steady-motion "
@@ -145,21 +288,26 @@ def _check_all_equations(problem: EquilibriumProblem, branches: list[Branch], pv
 STABLE = ("stable", "asymptotically stable")
 
 
-def _point_verdicts(problem: EquilibriumProblem, branches: list[Branch], pvec) -> None:
+def _point_verdicts(problem: EquilibriumProblem, branches: list[Branch], at) -> None:
     """Each branch point gets the verdict a single equilibrium would (energy, Routh and gyroscopic arguments
     included), not only the eigenvalue test: a conservative branch is stable where the point analysis says so
     (the eigenvalue test alone drew every conservative branch unstable)."""
     for branch in branches:
         for pt in branch.points:
+            P = at(pt.p)  # first: the given rates of the point
             e = problem.equilibrium(pt.x)
-            assess(problem, e, pvec(pt.p))
+            assess(problem, e, P)
             pt.verdict = e.stability
             pt.stable = e.stability in STABLE
 
 
 def _merge_events(events: list[dict], angles: list[bool], step: float) -> list[dict]:
     """One entry per bifurcation point. A nontrivial branch folding back exactly where another branch has a
-    branch point (a pitchfork) is one branch point, not a fold."""
+    branch point (a pitchfork) is one branch point, not a fold. The other kinds merge only with their own."""
+    static = ("fold", "branch_point")
+
+    def same_class(a: dict, b: dict) -> bool:
+        return a["kind"] == b["kind"] or (a["kind"] in static and b["kind"] in static)
 
     def close(a: dict, b: dict) -> bool:
         if abs(a["value"] - b["value"]) > max(1e-6, step):
@@ -173,7 +321,7 @@ def _merge_events(events: list[dict], angles: list[bool], step: float) -> list[d
     clusters: list[list[dict]] = []
     for ev in events:
         for cluster in clusters:
-            if any(close(ev, other) for other in cluster) and (ev["kind"] == "hopf") == (cluster[0]["kind"] == "hopf"):
+            if any(close(ev, other) for other in cluster) and same_class(ev, cluster[0]):
                 cluster.append(ev)
                 break
         else:

@@ -5,7 +5,7 @@ from dataclasses import dataclass, field
 from typing import Any, Callable, Sequence
 
 import numpy as np
-from scipy.optimize import brentq
+from scipy.optimize import brentq, linear_sum_assignment
 
 ArrayFn = Callable[[np.ndarray, float], np.ndarray]
 
@@ -29,7 +29,7 @@ class BranchPoint:
 
 @dataclass
 class Bifurcation:
-    kind: str      # "fold", "branch_point" or "hopf"
+    kind: str      # "fold", "branch_point", "hopf", "zero_eigenvalue" or "collision" (see continue_branch)
     p: float
     x: np.ndarray
     index: int     # index in the branch's point list just before the event
@@ -40,6 +40,7 @@ class Branch:
     points: list[BranchPoint] = field(default_factory=list)
     bifurcations: list[Bifurcation] = field(default_factory=list)
     truncated: bool = False  # the step limit ended it inside the range (not a bound, a closed loop or ds_min)
+    stalled: list[float] = field(default_factory=list)  # p where it ended inside the range: no step >= ds_min
 
 
 class _Fail(Exception):
@@ -188,15 +189,23 @@ def _pos_counts(ev: np.ndarray, tol_re: float) -> tuple[int, int]:
     return int(np.sum(pos & real)), int(np.sum(pos & ~real))
 
 
-def _pair_crossing(ev0: np.ndarray, ev1: np.ndarray, real: bool, tol_re: float):
-    """Pair (by sorting) the eigenvalues of one kind at both ends and return the pair whose Re crosses 0."""
-    if real:
-        a = np.sort(ev0[_is_real(ev0)].real).astype(complex)
-        b = np.sort(ev1[_is_real(ev1)].real).astype(complex)
-    else:
-        a = ev0[~_is_real(ev0) & (ev0.imag > 0)]
-        b = ev1[~_is_real(ev1) & (ev1.imag > 0)]
-        a, b = a[np.argsort(a.imag)], b[np.argsort(b.imag)]
+def _upper(ev: np.ndarray) -> np.ndarray:
+    """The complex eigenvalues with Im > 0 (one of each conjugate pair)."""
+    return ev[~_is_real(ev) & (ev.imag > 0)]
+
+
+def _matched(a: np.ndarray, b: np.ndarray) -> list[tuple[complex, complex]]:
+    """Eigenvalues of two neighbouring points paired by least total distance (as many pairs as the shorter)."""
+    if len(a) == 0 or len(b) == 0:
+        return []
+    rows, cols = linear_sum_assignment(np.abs(a[:, None] - b[None, :]))
+    return [(complex(a[i]), complex(b[j])) for i, j in zip(rows, cols)]
+
+
+def _real_crossing(ev0: np.ndarray, ev1: np.ndarray, tol_re: float):
+    """Pair (by sorting) the real eigenvalues at both ends and return the pair that crosses 0."""
+    a = np.sort(ev0[_is_real(ev0)].real).astype(complex)
+    b = np.sort(ev1[_is_real(ev1)].real).astype(complex)
     if len(a) != len(b) or len(a) == 0:
         return None
     crossing = [k for k in range(len(a)) if (a[k].real > tol_re) != (b[k].real > tol_re)]
@@ -213,6 +222,7 @@ class _Continuation:
         self.p_min, self.p_max = float(p_min), float(p_max)
         self.ds, self.ds_min, self.ds_max = float(ds), float(ds_min), float(ds_max)
         self.max_steps = int(max_steps)
+        self.hopf_at_end = False  # the previous step found a Hopf point exactly at its end
 
     def node(self, z: np.ndarray, t: np.ndarray) -> _Node:
         return _Node(z, t, self.tr.det(z), self.tr.eigenvalues(z))
@@ -277,7 +287,6 @@ class _Continuation:
         rb, cb = _pos_counts(b.ev, tol_re)
         dn, dr, dc = (rb + cb) - (ra + ca), rb - ra, cb - ca
         real_cross = dn != 0 and dr != 0 and not (dc != 0 and dn % 2 == 0 and abs(dn) >= 2)
-        hopf = dn != 0 and dc != 0 and not real_cross
 
         if not fold and ta != 0.0:  # ta == 0: the step starts at a fold (only possible at the start point)
             if _sign_changed(a.det, b.det):
@@ -285,9 +294,16 @@ class _Continuation:
                     return tr.det(self.at(a, b, s))
                 events.append(("branch_point", self.locate(a, b, g_det, a.det, b.det)))
             elif real_cross:
-                events.append(("branch_point", self._locate_eig(a, b, True)))
-        if hopf:
-            events.append(("hopf", self._locate_eig(a, b, False)))
+                events.append(("zero_eigenvalue", self._locate_real(a, b)))
+        hopfs = self._hopf(a, b, index)
+        events += [("hopf", s) for s in hopfs]
+        # a complex pair left or reached the imaginary axis without crossing it transversally: on a conservative
+        # (gyroscopic) branch two eigenvalues meet on the axis and split off it (Krein collision): no Hopf point
+        if dn != 0 and dc != 0 and not real_cross and not hopfs and not self.hopf_at_end:
+            s = self._locate_count(a, b)
+            if self._collision(a, b, s):
+                events.append(("collision", s))
+        self.hopf_at_end = any(s >= float(a.t @ (b.z - a.z)) for s in hopfs)
 
         out = []
         for kind, s in events:
@@ -301,29 +317,121 @@ class _Continuation:
         out.sort(key=lambda e: e[0])
         return out
 
-    def _locate_eig(self, a: _Node, b: _Node, real: bool) -> float:
-        tr = self.tr
-        tol_re = tr.tol_re
+    # -- Hopf points: a simple complex pair crossing the imaginary axis transversally ------------------------
+    def _hopf(self, a: _Node, b: _Node, index: int) -> list[float]:
+        """Arclengths in the step where a complex pair crosses the imaginary axis transversally.
+
+        The pair (eigenvalues of the two ends matched by least total distance) must have Re < -tol_re at one end
+        and Re > tol_re at the other, or end exactly on the axis and be off it on the other side just beyond
+        that end (a probe point: the crossing is then at the end). The located crossing must lie on the axis
+        with Im != 0, and be simple (no other eigenvalue there): where a pair only reaches the axis and stays on
+        it, or two eigenvalues meet on it (a conservative branch), the crossing speed on one side is zero."""
+        tol = self.tr.tol_re
         s1 = float(a.t @ (b.z - a.z))
-        n0 = sum(_pos_counts(a.ev, tol_re))
+        out = []
+        for la, lb in _matched(_upper(a.ev), _upper(b.ev)):
+            on_a, on_b = abs(la.real) <= tol, abs(lb.real) <= tol
+            if on_a and on_b:
+                continue
+            if on_a or on_b:
+                # the end on the axis: the step before (or after) decides, from the far side of that end
+                if on_a and index > 0:
+                    continue  # decided by the previous step (its far side is this step's other end)
+                near = a if on_a else b
+                beyond = self._probe(near, -1.0 if on_a else 1.0, s1)
+                if beyond is None:
+                    continue
+                lc = beyond[np.argmin(np.abs(beyond - (la if on_a else lb)))]
+                ref = lb if on_a else la
+                if abs(lc.real) > tol and lc.real * ref.real < 0.0 and self._simple(near.ev, la if on_a else lb):
+                    out.append(0.0 if on_a else s1)
+                continue
+            if la.real * lb.real > 0.0:
+                continue
+            s, lam = self._track_root(a, b, la, lb)
+            if s is not None and abs(lam.real) <= 1e-3 * max(abs(la.real), abs(lb.real)) \
+                    and not _is_real(np.array([lam]))[0] and self._simple(self.tr.eigenvalues(self.at(a, b, s)), lam):
+                out.append(s)
+        return out
 
-        def pred(s: float) -> bool:
-            return sum(_pos_counts(tr.eigenvalues(self.at(a, b, s)), tol_re)) != n0
+    def _track_root(self, a: _Node, b: _Node, la: complex, lb: complex) -> tuple[float | None, complex]:
+        """Where the real part of the eigenvalue followed from la (at a) to lb (at b) vanishes (Brent)."""
+        tr = self.tr
+        s1 = float(a.t @ (b.z - a.z))
+        last = {}
 
-        pair = _pair_crossing(a.ev, b.ev, real, tol_re)
+        def g(s: float) -> float:
+            ev = _upper(tr.eigenvalues(self.at(a, b, s)))
+            if len(ev) == 0:
+                raise _Fail
+            ref = la + (s / s1) * (lb - la) if s1 > 0 else la
+            last[s] = ev[np.argmin(np.abs(ev - ref))]
+            return float(last[s].real)
+
+        try:
+            s = float(brentq(g, 0.0, s1, xtol=_LOCATE_XTOL, maxiter=200))
+            g(s)  # the followed eigenvalue at the root
+            return s, last[s]
+        except (_Fail, ArithmeticError, ValueError, RuntimeError):
+            return None, 0j
+
+    def _probe(self, nd: _Node, side: float, h: float) -> np.ndarray | None:
+        """Eigenvalues at the branch point about h beyond nd (side +1: along its tangent, -1: against it)."""
+        for _ in range(4):
+            res = self.tr.newton(nd.z + side * h * nd.t, nd.t, max_iter=4 * _MAX_CORRECTOR_ITER)
+            if res is not None:
+                try:
+                    return self.tr.eigenvalues(res[0])
+                except (ArithmeticError, ValueError):
+                    return None
+            h *= 0.5
+        return None
+
+    @staticmethod
+    def _simple(ev: np.ndarray, lam: complex) -> bool:
+        """No other eigenvalue at lam (an eigenvalue meeting another where it crosses is not a Hopf point)."""
+        d = np.sort(np.abs(ev - lam))
+        return len(d) < 2 or d[1] > 1e-5 * (1.0 + abs(lam))
+
+    def _collision(self, a: _Node, b: _Node, s: float) -> bool:
+        """Two eigenvalues meet on the imaginary axis at s (within the location tolerance)."""
+        try:
+            ev = _upper(self.tr.eigenvalues(self.at(a, b, s)))
+        except (_Fail, ArithmeticError, ValueError):
+            return False
+        tol = 1e-4 * (1.0 + float(np.max(np.abs(ev), initial=0.0)))
+        close = np.abs(ev[:, None] - ev[None, :]) <= tol
+        on_axis = np.abs(0.5 * (ev[:, None] + ev[None, :]).real) <= tol
+        return bool(np.any(np.triu(close & on_axis, 1)))
+
+    def _count_changed(self, a: _Node, b: _Node) -> Callable[[float], bool]:
+        """pred(s): the number of eigenvalues with Re > tol_re at s differs from a's."""
+        tr = self.tr
+        n0 = sum(_pos_counts(a.ev, tr.tol_re))
+        return lambda s: sum(_pos_counts(tr.eigenvalues(self.at(a, b, s)), tr.tol_re)) != n0
+
+    def _locate_count(self, a: _Node, b: _Node) -> float:
+        """Arclength where the number of eigenvalues with Re > tol_re changes (bisection)."""
+        return self.locate(a, b, lambda s: 0.0, 1.0, 1.0, self._count_changed(a, b))
+
+    def _locate_real(self, a: _Node, b: _Node) -> float:
+        """Arclength where a real eigenvalue crosses 0 (Brent on it, else bisection on the count)."""
+        tr = self.tr
+        s1 = float(a.t @ (b.z - a.z))
+        pair = _real_crossing(a.ev, b.ev, tr.tol_re)
         if pair is None:
-            return self.locate(a, b, lambda s: 0.0, 1.0, 1.0, pred)
+            return self._locate_count(a, b)
         l0, l1 = pair
 
         def g(s: float) -> float:
             ev = tr.eigenvalues(self.at(a, b, s))
-            ev = ev[_is_real(ev)] if real else ev[~_is_real(ev) & (ev.imag > 0)]
+            ev = ev[_is_real(ev)]
             if len(ev) == 0:
                 raise _Fail
             ref = l0 + (s / s1) * (l1 - l0) if s1 > 0 else l0
             return float(ev[np.argmin(np.abs(ev - ref))].real)
 
-        return self.locate(a, b, g, float(l0.real), float(l1.real), pred)
+        return self.locate(a, b, g, float(l0.real), float(l1.real), self._count_changed(a, b))
 
     # -- the predictor-corrector loop ----------------------------------------------------------------
     def run(self, z0: np.ndarray, direction: float) -> tuple[Branch, bool]:
@@ -337,6 +445,7 @@ class _Continuation:
             t0 = t0 * np.sign(t0[k]) * np.sign(direction)
         start = self.node(z0, t0)
         cur = start
+        self.hopf_at_end = False
         branch = Branch(points=[self.point(start)], bifurcations=[])
         closed = False
         ds = min(max(self.ds, self.ds_min), self.ds_max)
@@ -374,6 +483,7 @@ class _Continuation:
             if z1 is None:
                 ds *= 0.5
                 if ds < self.ds_min:
+                    branch.stalled.append(float(cur.z[n]))  # the corrector failed down to the smallest step
                     break
                 continue
             seg = float(cur.t @ (z1 - cur.z))
@@ -416,9 +526,14 @@ def _setup(F: ArrayFn, Fx: ArrayFn, Fp: ArrayFn, x0, p0: float, p_min: float, p_
     z = tr.correct_fixed_p(tr.z_of(x0, p0), max_iter=_MAX_START_ITER, monotone=False)
     if z is None:
         try:
-            r = float(np.max(np.abs(tr.residual(tr.z_of(x0, p0)))))
-        except Exception:  # noqa: BLE001 - only for the message
-            r = float("nan")
+            z0 = tr.z_of(x0, p0)
+            r = float(np.max(np.abs(tr.residual(z0))))
+            finite = bool(np.all(np.isfinite(tr.jac(z0))))
+        except (ArithmeticError, ValueError):
+            r, finite = float("nan"), False
+        if not (finite and np.isfinite(r)):
+            raise ValueError(f"continuation: the equations or their derivatives cannot be evaluated at the start "
+                             f"point (p={p0}): they are not defined or not smooth there")
         raise ValueError(f"continuation: Newton correction of the start point at fixed p={p0} did not converge "
                          f"in {_MAX_START_ITER} iterations (|F(x0, p0)| = {r:.3g}); x0 is not near an "
                          f"equilibrium at p0, or the Jacobian Fx is wrong")
@@ -436,10 +551,16 @@ def continue_branch(F: ArrayFn, Fx: ArrayFn, Fp: ArrayFn, x0: np.ndarray | Seque
     fold) it is oriented so that its first nonzero component has the sign of ``direction`` (positive for +1), and
     a fold exactly at the start is not reported (``sweep_parameter`` reports it). Arclength is measured in
     (x / x_scale, p). The branch ends when p leaves [p_min, p_max] (the last point is placed exactly on the
-    bound), after ``max_steps`` steps, when the step would drop below ``ds_min``, or when it closes on its start
-    (the last point then repeats the first). Events are located between consecutive points: "fold" (tangent dp
-    changes sign), "branch_point" (det Fx, or a real eigenvalue of ``eig``, changes sign without a fold) and
-    "hopf" (a complex pair of ``eig`` crosses the imaginary axis); eigenvalues with |Re| <= tol_re count as 0.
+    bound), after ``max_steps`` steps (``truncated``), when the step would drop below ``ds_min`` (the corrector
+    fails even there: the equations are not smooth, or not defined, beyond; ``stalled`` records p), or when it
+    closes on its start (the last point then repeats the first). Events are located between consecutive points:
+    "fold" (tangent dp changes sign), "branch_point" (det Fx changes sign without a fold), "zero_eigenvalue" (a
+    real eigenvalue of ``eig`` crosses 0 while the branch neither folds nor branches: ``eig`` sees more than Fx,
+    e.g. the extremum of a cyclic momentum along a family of steady motions), "hopf" (a simple complex pair of
+    ``eig`` crosses the imaginary axis transversally: Re < -tol_re on one side, > tol_re on the other) and
+    "collision" (the number of eigenvalues with Re > tol_re changes because two eigenvalues meet on the imaginary
+    axis and leave it: a conservative, gyroscopic branch, Krein collision; not a Hopf point); |Re| <= tol_re
+    counts as 0.
     """
     if not direction:
         raise ValueError("continue_branch: direction must be nonzero")
@@ -521,4 +642,5 @@ def _merge(bwd: Branch, fwd: Branch) -> Branch:
         if not dup:
             bifs.append(Bifurcation(b.kind, b.p, b.x, b.index + m - 1))
     bifs.sort(key=lambda b: b.index)
-    return Branch(points=points, bifurcations=bifs, truncated=bwd.truncated or fwd.truncated)
+    return Branch(points=points, bifurcations=bifs, truncated=bwd.truncated or fwd.truncated,
+                  stalled=bwd.stalled + fwd.stalled)

@@ -199,6 +199,11 @@ class EquilibriumProblem:
     def _Fp(self):
         return self._memo("Fp", lambda: compile_exprs(list(self._dF_dp_exprs()), self._args))
 
+    @cached_property
+    def _Fr(self):
+        rates = [self._u(c) for c in self.fixed_rates]
+        return self._memo("Fr", lambda: compile_exprs(list(self.residual_exprs.jacobian(rates)), self._args))
+
     # ------------------------------------------------------------------------------------- numerics
     def extra(self) -> list[float]:
         return [self.fixed_rates[c] for c in self.fixed_rates]
@@ -215,6 +220,12 @@ class EquilibriumProblem:
     def Fp(self, z: np.ndarray, p: np.ndarray) -> np.ndarray:
         """dF/dp for every parameter (columns in model.parameter_symbols order)."""
         return np.array(self._Fp(*z, *self.extra(), *p), dtype=float).reshape(len(self.residual_exprs), -1)
+
+    def Fr(self, z: np.ndarray, p: np.ndarray) -> np.ndarray:
+        """dF/d(given rates) (columns in fixed_rates order): a family's rate as a continuation parameter."""
+        if not self.fixed_rates:
+            return np.zeros((len(self.residual_exprs), 0))
+        return np.array(self._Fr(*z, *self.extra(), *p), dtype=float).reshape(len(self.residual_exprs), -1)
 
     def is_angle(self) -> np.ndarray:
         mask = self.__dict__.get("_angle_mask")
