@@ -230,13 +230,22 @@ def sweep(model: MechanicalModel, name: str, start: float, stop: float, points: 
     except (ValueError, ArithmeticError) as exc:
         raise AnalysisError(f"--sweep {name}: {exc}") from None
     _check_all_equations(problem, branches, par.at, name)
-    _point_verdicts(problem, branches, par.at)
+    artefacts = {id(b) for b in _point_verdicts(problem, branches, par.at)}
+    twins = {id(b) for k, b in enumerate(branches) if id(b) not in artefacts
+             and any(id(a) not in artefacts and _same_family(problem, a, b, par.at) for a in branches[:k])}
+    branches = [b for b in branches if id(b) not in artefacts | twins]
     nreport = len(problem.free) + len(problem.rate_unknowns)
     names = list(problem.free) + [f"der({c})" for c in problem.rate_unknowns]
     angles = [problem.angles.get(c, False) for c in problem.free] + [False] * len(problem.rate_unknowns)
     result = SweepResult(name, names, angles, branches)
     if undefined:
         result.notes.append(f"the equations cannot be evaluated at {', '.join(undefined)}: no branch starts there")
+    if artefacts:
+        result.notes.append(f"{len(artefacts)} branch(es) at a gimbal-lock point are no steady motions in a regular "
+                            "chart (artefacts of the singular angles) and are not listed")
+    if twins:
+        result.notes.append(f"{len(twins)} branch(es) repeated another one in other angles (the same physical steady "
+                            "motions) and are not listed")
     cut = [k for k, branch in enumerate(branches, start=1) if branch.truncated]
     if cut:
         result.notes.append(f"branch(es) {', '.join(map(str, cut))} ended at the step limit ({max(2000, 20 * points)} "
@@ -288,17 +297,47 @@ def _check_all_equations(problem: EquilibriumProblem, branches: list[Branch], at
 STABLE = ("stable", "asymptotically stable")
 
 
-def _point_verdicts(problem: EquilibriumProblem, branches: list[Branch], at) -> None:
+def _point_verdicts(problem: EquilibriumProblem, branches: list[Branch], at) -> list[Branch]:
     """Each branch point gets the verdict a single equilibrium would (energy, Routh and gyroscopic arguments
     included), not only the eigenvalue test: a conservative branch is stable where the point analysis says so
-    (the eigenvalue test alone drew every conservative branch unstable)."""
+    (the eigenvalue test alone drew every conservative branch unstable). Points at a gimbal lock are classified
+    in a regular chart as `equilibria` does (charts.py); the branches returned are those made only of points
+    that are no steady motion in a regular chart (artefacts of the singular chart)."""
+    from mechsys.analysis.charts import Unchartable, reclassify, singularities
+
+    artefacts = []
     for branch in branches:
+        bad = 0
         for pt in branch.points:
             P = at(pt.p)  # first: the given rates of the point
             e = problem.equilibrium(pt.x)
             assess(problem, e, P)
+            found = singularities(problem.model, e.coordinates, P)
+            if found:
+                try:
+                    if reclassify(problem, e, found[0], P) is None:
+                        bad += 1
+                        e.stability = "undecided"
+                except (Unchartable, np.linalg.LinAlgError):
+                    e.stability = "undecided"
             pt.verdict = e.stability
             pt.stable = e.stability in STABLE
+        if branch.points and bad == len(branch.points):
+            artefacts.append(branch)
+    return artefacts
+
+
+def _same_family(problem: EquilibriumProblem, a: Branch, b: Branch, at) -> bool:
+    """``b`` is ``a`` in other coordinates (a rotation sequence reaches every orientation twice): at a parameter
+    value both reached, the same physical steady motion."""
+    from mechsys.analysis.charts import same_motion
+
+    for pb in b.points:
+        pa = next((pt for pt in a.points if abs(pt.p - pb.p) <= 1e-12 * (1 + abs(pb.p))), None)
+        if pa is not None:
+            P = at(pb.p)
+            return same_motion(problem, problem.equilibrium(pa.x), problem.equilibrium(pb.x), P)
+    return False
 
 
 def _merge_events(events: list[dict], angles: list[bool], step: float) -> list[dict]:

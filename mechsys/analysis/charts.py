@@ -81,6 +81,8 @@ def _chart_model(model, link: str, sequence: str):
         spec = doc.spec.model_copy(deep=True)
         spec.links[link].joint.sequence = sequence
         doc.spec = spec
+        doc.raw = copy.deepcopy(doc.raw)  # the compiled-code cache keys hash the file's structure: say it too
+        doc.raw["links"][link]["joint"]["sequence"] = sequence
         memo[(link, sequence)] = MechanicalModel(doc)
     return memo[(link, sequence)]
 
@@ -89,36 +91,38 @@ def reclassify(problem: EquilibriumProblem, e: Equilibrium, where: Singularity, 
     """Classify ``e`` (found at a singular point of ``where``'s chart) in a regular sequence of the same joint.
     Returns the steady motion's identity there (sequence, rounded state): roots of the singular chart that are
     one steady motion share it. None when it is not a steady motion there (an artefact of the singular chart).
-    Raises _Unchartable with the reason when no regular chart can be used."""
+    Raises Unchartable with the reason when no regular chart can be used."""
     from mechsys.analysis.stability import assess
 
     if where.sequence is None:
-        raise _Unchartable("only spherical and free joints can be re-charted (another rotation sequence)")
+        raise Unchartable("only spherical and free joints can be re-charted (another rotation sequence)")
     if problem.m:
-        raise _Unchartable("re-charting is not available with closed-loop constraints")
+        raise Unchartable("re-charting is not available with closed-loop constraints")
     a_old = np.array([e.coordinates.get(n, 0.0) for n in where.angles])
     rates_old = np.array([e.rates.get(n, 0.0) for n in where.angles])
     R = rotation(where.sequence, a_old)
     omega = rate_matrix(where.sequence, a_old) @ rates_old
     best = None
-    for seq in alternatives(where.sequence):
+    keep = "first" if where.angles[0] in problem.cyclic else "last" if where.angles[-1] in problem.cyclic else "any"
+    for seq in alternatives(where.sequence, keep):
         a = angles_of(seq, R)
         if a is not None and (best is None or ratio(rate_matrix(seq, a)) > best[2]):
             best = (seq, a, ratio(rate_matrix(seq, a)))
     if best is None or best[2] < REGULAR:
-        raise _Unchartable("no other sequence of the joint is regular here")
+        raise Unchartable("no other sequence of the joint is regular here")
     seq, a_new, _ = best
     rates_new = np.linalg.solve(rate_matrix(seq, a_new), omega)
     base = _chart_model(problem.model, where.link, seq)
     values = {n: float(v) for n, v in zip(where.angles, a_new)}
     values.update({f"der({n})": float(v) for n, v in zip(where.angles, rates_new)})
     values.update({f"der({c})": float(v) for c, v in e.rates.items() if c not in where.angles})
+    values.update({s.name: float(v) for s, v in zip(problem.model.parameter_symbols, p)})  # a sweep's values
     alt = base.with_overrides(values)
     other = EquilibriumProblem(alt)
     moving = [n for n, v in zip(where.angles, rates_new) if abs(v) > 1e-9 * (1 + np.max(np.abs(rates_new)))
               and n not in other.cyclic]
     if moving:
-        raise _Unchartable(f"in the {seq} sequence the motion turns the non-cyclic angle(s) {', '.join(moving)}")
+        raise Unchartable(f"in the {seq} sequence the motion turns the non-cyclic angle(s) {', '.join(moving)}")
     coords = {c: values.get(c, e.coordinates.get(c, 0.0)) for c in other.free}
     rates = {c: values.get(f"der({c})", e.rates.get(c, 0.0)) for c in other.cyclic}
     e2 = Equilibrium(coords, rates, [])
@@ -187,7 +191,7 @@ def _conventional(problem: EquilibriumProblem, e: Equilibrium) -> bool:
     return all(v >= 0 or problem.angles.get(c, False) for c, v in e.coordinates.items())
 
 
-class _Unchartable(Exception):
+class Unchartable(Exception):
     """No regular chart is available for an equilibrium at a coordinate singularity."""
 
 
@@ -216,7 +220,7 @@ def review(problem: EquilibriumProblem, equilibria: list[Equilibrium], p: np.nda
             if recharted in seen:
                 continue  # the same steady motion, reached at another point of the singular chart's continuum
             seen.add(recharted)
-        except (_Unchartable, np.linalg.LinAlgError) as exc:
+        except (Unchartable, np.linalg.LinAlgError) as exc:
             undecided += 1
             e.eigenvalues, e.jacobian, e.critical = np.zeros(0, complex), None, False
             e.stability = "undecided"

@@ -82,9 +82,12 @@ class _Shifts:
             shifted = q.copy()
             shifted[i] += rng.uniform(0.4, 2.6)
             for fn in self.fns:
-                with np.errstate(all="ignore"):
-                    a = np.asarray(fn(t, q, u, p), dtype=float)
-                    b = np.asarray(fn(t, shifted, u, p), dtype=float)
+                try:
+                    with np.errstate(all="ignore"):
+                        a = np.asarray(fn(t, q, u, p), dtype=float)
+                        b = np.asarray(fn(t, shifted, u, p), dtype=float)
+                except (ValueError, ArithmeticError):
+                    return False  # undefined there (sqrt of a negative value): no symmetry claimed from it
                 if not (np.all(np.isfinite(a)) and np.all(np.isfinite(b))):
                     return False  # a singular state: do not claim a symmetry from it
                 scale = max(1.0, float(np.max(np.abs(a))), float(np.max(np.abs(b))))
