@@ -337,6 +337,10 @@ def equilibria(
     verify: bool = typer.Option(False, "--verify", help="Integrate from small perturbations of each equilibrium and "
                                                         "check the verdicts against the motion (exit 1 if one "
                                                         "disagrees)."),
+    exhaustive: bool = typer.Option(False, "--exhaustive", help="Every isolated root of equations polynomial in the "
+                                                                "unknowns, sin and cos (half-angle substitution, "
+                                                                "Groebner basis) instead of the multistart; exit 2 "
+                                                                "when they are not, or too large."),
     fmt: TableFormat = typer.Option(TableFormat.text, "--format", "-f", help="Output format."),
     set_: Optional[List[str]] = SetOption,
     output: Optional[Path] = OutputOption,
@@ -353,10 +357,12 @@ def equilibria(
             raise InputError("--plot needs --sweep")
         if verify and sweep_spec:
             raise InputError("--verify cannot be combined with --sweep (verify the equilibria at one parameter value)")
+        if exhaustive and (boxes or sweep_spec):
+            raise InputError("--exhaustive returns every root: it cannot be combined with --search or --sweep")
         check_figures(plot=plot)
         check_outputs(output)
         model = load_model(file, set_)
-        result = find_equilibria(model, boxes)
+        result = find_equilibria(model, boxes, exhaustive=exhaustive)
         tables = rep.equilibria_tables(result)
         verifications, failed = None, []
         if verify:

@@ -4,6 +4,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from functools import cached_property
+from typing import TYPE_CHECKING
 
 import numpy as np
 import sympy as sp
@@ -11,6 +12,9 @@ import sympy as sp
 from mechsys.errors import AnalysisError
 from mechsys.mechanics.model import MechanicalModel
 from mechsys.numeric.lambdify import compile_exprs
+
+if TYPE_CHECKING:
+    from mechsys.analysis.exhaustive import Exhaustive
 
 
 def wrap(angle: float) -> float:
@@ -69,6 +73,7 @@ class EquilibriaResult:
     cyclic: list[str] = field(default_factory=list)
     fixed_rates: dict[str, float] = field(default_factory=dict)
     search: SearchReport | None = None
+    exhaustive: Exhaustive | None = None  # what the exhaustive mode computed (analysis/exhaustive.py)
 
 
 class EquilibriumProblem:
@@ -464,13 +469,20 @@ def solve_equilibria(problem: EquilibriumProblem, p: np.ndarray, search: dict | 
                      for k, (lo, hi) in enumerate(boxes))
         if not inside:
             continue
-        if any(problem.distance(z, r) < 1e-7 * (1 + np.linalg.norm(z[:nz])) for r in roots):
+        if not is_new_root(problem, z, roots):
             continue
         roots.append(z)
         plan.outside += [f"{n} = {z[k]:.6g}" for k, (n, (lo, hi)) in enumerate(zip(names, default_box))
                          if not (given[k] or problem.is_angle()[k] or n in plan.solved_rates
                                  or n in plan.spread_rates or lo <= z[k] <= hi)]
     return roots
+
+
+def is_new_root(problem: EquilibriumProblem, z: np.ndarray, roots: list[np.ndarray]) -> bool:
+    """z is not a root already found: none closer than 1e-7 (1 + |z|) in the coordinates and rates (angles on the
+    circle)."""
+    size = float(np.linalg.norm(z[: problem.nq + len(problem.rate_unknowns)]))
+    return not any(problem.distance(z, r) < 1e-7 * (1 + size) for r in roots)
 
 
 def _onto_constraints(problem: EquilibriumProblem, start: np.ndarray, p: np.ndarray) -> np.ndarray:
@@ -504,16 +516,24 @@ def _multiplier_guess(problem: EquilibriumProblem, start: np.ndarray, p: np.ndar
 
 
 def find_equilibria(model: MechanicalModel, search: dict[str, tuple[float, float]] | None = None,
-                    starts: int | None = None, seed: int = 0) -> EquilibriaResult:
-    """Equilibria (and steady motions of cyclic coordinates) with their Lyapunov stability."""
+                    starts: int | None = None, seed: int = 0, exhaustive: bool = False) -> EquilibriaResult:
+    """Equilibria (and steady motions of cyclic coordinates) with their Lyapunov stability. exhaustive: every
+    isolated root of polynomial sin/cos equations (analysis/exhaustive.py) instead of the multistart (search is
+    then not used)."""
     from mechsys.analysis.stability import assess
 
     problem = EquilibriumProblem(model)
     p = parameter_values(model)
     if not problem.unknowns:
         return _every_state(problem, p, search)
-    plan = search_plan(problem, search, starts)
-    roots = solve_equilibria(problem, p, search, starts, seed, plan)
+    exact = None
+    if exhaustive:
+        from mechsys.analysis.exhaustive import exhaustive_search
+
+        roots, plan, exact = exhaustive_search(problem, p, starts, seed)
+    else:
+        plan = search_plan(problem, search, starts)
+        roots = solve_equilibria(problem, p, search, starts, seed, plan)
     from mechsys.analysis.charts import review, singularities
 
     message = ""
@@ -537,8 +557,9 @@ def find_equilibria(model: MechanicalModel, search: dict[str, tuple[float, float
     message = "; ".join(m for m in (message, chart_note) if m)
     equilibria.sort(key=lambda e: tuple(e.coordinates.values()) + tuple(e.rates.values()))
     if not equilibria:
-        message = f"no equilibrium found: {plan.text()}; widen it with --search"
-    return EquilibriaResult(equilibria, message, problem.cyclic, dict(problem.fixed_rates), plan)
+        message = (f"no equilibrium found: {plan.text()}; widen it with --search" if plan is not None
+                   else "no equilibrium: the equations have no real root (exhaustive search)")
+    return EquilibriaResult(equilibria, message, problem.cyclic, dict(problem.fixed_rates), plan, exact)
 
 
 def _every_state(problem: EquilibriumProblem, p: np.ndarray, search: dict | None) -> EquilibriaResult:

@@ -30,6 +30,8 @@ def equilibria_tables(result: EquilibriaResult) -> list[Table]:
         t.notes.append(result.message)
     if result.search is not None and not result.message.startswith("no equilibrium found"):
         t.notes.append(f"search: {result.search.text()}")
+    if result.exhaustive is not None:
+        t.notes.append(f"search: {result.exhaustive.text()}")
     if result.fixed_rates:
         t.notes.append("steady motions form a family; rates fixed at the initial rate: "
                        + ", ".join(f"der({c}) = {fmt_number(v)}" for c, v in result.fixed_rates.items()))
@@ -69,9 +71,12 @@ def equilibria_payload(result: EquilibriaResult, bifurcations: list | None = Non
         return {**equilibria_payload(result, bifurcations),
                 "equilibria": [{**e.to_dict(), "verification": v.to_dict()}
                                for e, v in zip(result.equilibria, verifications)]}
-    return {"equilibria": [e.to_dict() for e in result.equilibria], "bifurcations": bifurcations or [],
-            "message": result.message, "cyclic": result.cyclic,
-            "search": result.search.to_dict() if result.search is not None else None}
+    payload = {"equilibria": [e.to_dict() for e in result.equilibria], "bifurcations": bifurcations or [],
+               "message": result.message, "cyclic": result.cyclic,
+               "search": result.search.to_dict() if result.search is not None else None}
+    if result.exhaustive is not None:  # --exhaustive only
+        payload["exhaustive"] = result.exhaustive.to_dict()
+    return payload
 
 
 def matrix_table(title: str, names: list[str], matrix: np.ndarray, row_names: list[str] | None = None) -> Table:
