@@ -48,10 +48,10 @@ def _modes(model: MechanicalModel, options: dict) -> Outputs:
 
 
 def _simulate(model: MechanicalModel, options: dict) -> Outputs:
-    from mechsys.analysis.simulate import simulate
+    from mechsys.analysis.charted import simulate_charted
 
     t_end = float(options.get("t_end", 10.0))
-    r = simulate(model, t_end, options.get("dt"), options.get("method", "auto"))
+    r = simulate_charted(model, t_end, options.get("dt"), options.get("method", "auto"))
     out: Outputs = {"t_end": float(r.t[-1]), "energy_drift": r.energy_drift,
                     "max_residual": float(np.max(r.residual)), "rhs_evaluations": r.rhs_evaluations,
                     "events": len(r.events)}

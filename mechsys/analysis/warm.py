@@ -3,11 +3,13 @@ skips sympy, pydantic and scipy and goes straight to the cached native integrato
 
 The plan holds only what the native path reads: coordinate names, parameter and initial values, the fastest
 decay rate (auto's stiffness decision is redone for the new t_end), the generated source of T and V (and of the
-constraint rows that projection reads), and the path of the compiled library. Scenes with events, contacts or
-drives (whose forces need the Python equations) always take the full path. Any change to the file, the options,
-mechsys or its code gives a new key. A plan is used only when it verifies (numeric/cache.py: owner, signature) and
-is consistent with the library it names (sizes of every array, the library's own signature); otherwise, and
-whenever MECHSYS_NATIVE=off, the run takes the full (cold) path, which writes the plan again."""
+constraint rows that projection reads), the rotation charts to watch, and the path of the compiled library. Scenes
+with events, contacts or drives (whose forces need the Python equations) always take the full path, and so does a
+warm run that comes near a gimbal lock of a watched chart (the full path switches charts: analysis/charted.py).
+Any change to the file, the options, mechsys or its code gives a new key. A plan is used only when it verifies
+(numeric/cache.py: owner, signature) and is consistent with the library it names (sizes of every array, the
+library's own signature); otherwise, and whenever MECHSYS_NATIVE=off, the run takes the full (cold) path, which
+writes the plan again."""
 from __future__ import annotations
 
 import hashlib
@@ -62,7 +64,9 @@ def _load_plan(plan: dict) -> Optional[tuple]:
         if (len(names) != n or not all(isinstance(x, str) for x in names) or m < 0
                 or p.shape != (nat.n_parameters,) or y0.shape != (2 * n,) or not np.all(np.isfinite(y0))
                 or any(mats[k].shape != shape for k, shape in shapes.items()) or mats["phi"].shape[1] != 1
-                or not np.isfinite(float(plan["decay_rate"])) or not isinstance(plan["warnings"], list)):
+                or not np.isfinite(float(plan["decay_rate"])) or not isinstance(plan["warnings"], list)
+                or not all(isinstance(seq, str) and len(seq) == 3 and all(0 <= int(i) < n for i in idx)
+                           and len(idx) == 3 for seq, idx in plan["charts"])):
             return None
     except (OSError, KeyError, TypeError, ValueError, SyntaxError, AttributeError):
         return None
@@ -105,6 +109,11 @@ def run_planned(path: Path, overrides: Sequence[str], t_end: float, dt: Optional
         Y, nfev, steps = run.y, run.nfev, run.nsteps
     seconds = time.perf_counter() - t1
     q, u = Y[:, :n], Y[:, n:]
+    if plan["charts"]:
+        from mechsys.analysis.charted import regular_run
+
+        if not regular_run(plan["charts"], grid, q, u):
+            return None  # near a gimbal lock: the full path integrates that stretch in another sequence
     T = np.array([c.T(t, qi, ui, p)[0, 0] for t, qi, ui in zip(grid, q, u)])
     V = np.array([c.V(t, qi, ui, p)[0, 0] for t, qi, ui in zip(grid, q, u)])
     warnings = list(plan["warnings"])
@@ -121,9 +130,13 @@ def remember(path: Path, overrides: Sequence[str], model, result: SimulationResu
     drives = any(con.name.startswith("drive(") for con in model.kin.constraints)  # need the multipliers
     if key is None or result.method != "native" or drives or model.events or model.kin.contacts:
         return
+    from mechsys.analysis.charted import NOTES, regular_run, watched
     from mechsys.analysis.equilibria import parameter_values
     from mechsys.analysis.simulate import RightHandSide, compile_model, stiffness
 
+    charts = [[seq, list(idx)] for _link, _kind, seq, idx in watched(model)]
+    if charts and not regular_run(charts, result.t[:1], result.q[:1], result.u[:1]):
+        return  # it starts at (or near) a gimbal lock of the file's angles: every run needs the full path
     nat = compile_model(model).native
     entry = cache.load(cache.model_key(model, "simulate"))
     if nat is None or nat.key is None or entry is None:
@@ -134,8 +147,8 @@ def remember(path: Path, overrides: Sequence[str], model, result: SimulationResu
     cache.store(key, {"coordinates": list(model.coordinates), "parameters": [float(x) for x in p],
                       "initial": [float(x) for x in y0], "decay_rate": radius, "library_key": nat.key,
                       "T": entry["T"], "V": entry["V"], "phi": entry["phi"], "A": entry["A"], "cv": entry["cv"],
-                      "m": entry["m"],
-                      "warnings": [w for w in result.warnings if not w.startswith("auto method")]})
+                      "m": entry["m"], "charts": charts,
+                      "warnings": [w for w in result.warnings if not w.startswith(("auto method", *NOTES))]})
 
 
 def simulate_file(path: Path, overrides: Sequence[str], t_end: float, dt: Optional[float], method: str,
@@ -144,8 +157,9 @@ def simulate_file(path: Path, overrides: Sequence[str], t_end: float, dt: Option
     """What `mechsys simulate FILE` runs: (result, model or None). A repeated run of the same file and options
     starts from its plan (no model is built, so None) unless ``need_model`` (reactions, animations); otherwise the
     model is loaded with prescribed coordinates released into drives (their driving forces become outputs),
-    simulated, and its plan remembered. The timings gain "load": everything not derivation or integration."""
-    from mechsys.analysis.simulate import simulate
+    simulated (through gimbal locks: analysis/charted.py), and its plan remembered. The timings gain "load":
+    everything not derivation or integration."""
+    from mechsys.analysis.charted import simulate_charted
 
     t0 = time.perf_counter()
     result = None if need_model else run_planned(path, overrides, t_end, dt, method, rtol, atol, progress,
@@ -156,8 +170,8 @@ def simulate_file(path: Path, overrides: Sequence[str], t_end: float, dt: Option
         from mechsys.model.load import parse_assignments
 
         model = mechsys.load(path, parse_assignments(list(overrides)), release_prescribed=True)
-        result = simulate(model, t_end, dt, method, rtol, atol, capture_velocity=capture_velocity,
-                          progress=progress, max_steps=max_steps)
+        result = simulate_charted(model, t_end, dt, method, rtol, atol, capture_velocity=capture_velocity,
+                                  progress=progress, max_steps=max_steps)
         remember(path, overrides, model, result)
     result.timings = {"load": time.perf_counter() - t0 - sum(result.timings.values()), **result.timings}
     return result, model
