@@ -321,6 +321,16 @@ def check_range(option: str, lo: float, hi: float, ordered: bool = True, ends: s
         raise InputError(f"{option}: {first} must be less than {second}")
 
 
+def steady_options(given: Optional[List[str]], solve: Optional[List[str]], independent: Optional[str]):
+    """--given, --solve and --independent as the library's SteadyOptions."""
+    from mechsys.analysis.equilibria import SteadyOptions
+
+    names = [c.strip() for c in (independent or "").split(",") if c.strip()]
+    if independent is not None and not names:
+        raise InputError("--independent: expected comma-separated coordinate names")
+    return SteadyOptions([g.strip() for g in given or []], [s.strip() for s in solve or []], names)
+
+
 @app.command()
 def equilibria(
     file: Path = typer.Argument(..., help="Model file (YAML)."),
@@ -329,7 +339,9 @@ def equilibria(
     sweep_: Optional[str] = typer.Option(None, "--sweep", metavar="NAME=START:STOP:N",
                                          help="Follow every branch as parameter NAME varies (continuation)."),
     plot: Optional[Path] = typer.Option(None, "--plot", help="With --sweep: bifurcation diagram (.png, .svg)."),
-    plot_coordinate: Optional[str] = typer.Option(None, "--plot-coordinate", help="Coordinate on the diagram's axis."),
+    plot_coordinate: Optional[str] = typer.Option(None, "--plot-coordinate",
+                                                  help="Coordinate on the diagram's axis, or eigenvalues (Re and Im "
+                                                       "against the parameter)."),
     linearize_: bool = typer.Option(False, "--linearize", help="Print M, C, G, K, N and A, B about each equilibrium."),
     numeric: bool = typer.Option(False, "--numeric", help="With --linearize: numbers at each equilibrium "
                                                           "(default: expressions, then numbers)."),
@@ -341,6 +353,13 @@ def equilibria(
                                                                 "unknowns, sin and cos (half-angle substitution, "
                                                                 "Groebner basis) instead of the multistart; exit 2 "
                                                                 "when they are not, or too large."),
+    given: Optional[List[str]] = typer.Option(None, "--given", metavar="NAME",
+                                              help="Nonholonomic: hold this coordinate at its file (or --set) value."),
+    solve: Optional[List[str]] = typer.Option(None, "--solve", metavar="der(NAME)",
+                                              help="Nonholonomic: solve for this given rate of a family instead."),
+    independent: Optional[str] = typer.Option(None, "--independent", metavar="NAMES",
+                                              help="Nonholonomic: comma-separated coordinates whose rates are "
+                                                   "independent speeds; --linearize prints M, C, K over them."),
     fmt: TableFormat = typer.Option(TableFormat.text, "--format", "-f", help="Output format."),
     set_: Optional[List[str]] = SetOption,
     output: Optional[Path] = OutputOption,
@@ -361,8 +380,9 @@ def equilibria(
             raise InputError("--exhaustive returns every root: it cannot be combined with --search or --sweep")
         check_figures(plot=plot)
         check_outputs(output)
+        options = steady_options(given, solve, independent)
         model = load_model(file, set_)
-        result = find_equilibria(model, boxes, exhaustive=exhaustive)
+        result = find_equilibria(model, boxes, exhaustive=exhaustive, options=options)
         tables = rep.equilibria_tables(result)
         verifications, failed = None, []
         if verify:
@@ -376,12 +396,20 @@ def equilibria(
             from mechsys.analysis.bifurcation import plot_sweep, sweep
 
             (name, (start, stop, n)), = sweep_spec.items()
-            swept = sweep(model, name, start, stop, int(n), boxes)
+            swept = sweep(model, name, start, stop, int(n), boxes, options)
             bifurcations = swept.bifurcations
             tables += rep.sweep_tables(swept)
             if plot is not None:
                 write_figure(plot, lambda tmp: plot_sweep(swept, tmp, plot_coordinate))
-        if linearize_ or hurwitz:
+        if (linearize_ or hurwitz) and not model.is_holonomic:
+            from mechsys.analysis.equilibria import make_problem
+            from mechsys.analysis.nonholonomic import linearize_steady
+
+            problem = make_problem(model, options)
+            for k, e in enumerate(result.equilibria, start=1):
+                tables += rep.steady_linearization_tables(linearize_steady(problem, e), f"steady motion {k}",
+                                                          options.independent, hurwitz)
+        elif linearize_ or hurwitz:
             from mechsys.analysis.linearize import linearize, symbolic_matrices
 
             if linearize_ and not numeric:
@@ -419,6 +447,12 @@ def modes(
     plot: Optional[Path] = typer.Option(None, "--plot", help="Mode shapes (or, with --frf, the FRF) as .png/.svg."),
     state_space: bool = typer.Option(False, "--state-space", help="Print the state-space matrices A, B, C, D."),
     transfer: bool = typer.Option(False, "--transfer", help="Transfer function from --input to --response."),
+    given: Optional[List[str]] = typer.Option(None, "--given", metavar="NAME",
+                                              help="Nonholonomic: hold this coordinate at its file (or --set) value."),
+    solve: Optional[List[str]] = typer.Option(None, "--solve", metavar="der(NAME)",
+                                              help="Nonholonomic: solve for this given rate of a family instead."),
+    independent: Optional[str] = typer.Option(None, "--independent", metavar="NAMES",
+                                              help="Nonholonomic: coordinates whose rates are independent speeds."),
     fmt: TableFormat = typer.Option(TableFormat.text, "--format", "-f", help="Output format."),
     set_: Optional[List[str]] = SetOption,
     output: Optional[Path] = OutputOption,
@@ -454,8 +488,13 @@ def modes(
             check_number(f"--frf {frf!r}: N", frf_range[2], high=MAX_POINTS)
         check_figures(plot=plot)
         check_outputs(output)
+        options = steady_options(given, solve, independent)
         model = load_model(file, set_)
-        result = modal.vibration_modes(model, point or None)
+        result = modal.vibration_modes(model, point or None, options)
+        if result.system is None and (frf_range is not None or state_space or transfer):
+            raise InputError("--frf, --state-space and --transfer need a second-order system on the coordinates; "
+                             "a nonholonomic steady motion has none: `mechsys equilibria --linearize` prints its "
+                             "A and B")
         tables = rep.modes_tables(result)
         payload = result.to_dict()
         inp = frf_input or result.coordinates[0]

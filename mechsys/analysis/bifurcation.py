@@ -9,7 +9,7 @@ import numpy as np
 import sympy as sp
 
 from mechsys.analysis.continuation import Branch, sweep_parameter
-from mechsys.analysis.equilibria import EquilibriumProblem, parameter_values, solve_equilibria, wrap
+from mechsys.analysis.equilibria import EquilibriumProblem, make_problem, parameter_values, solve_equilibria, wrap
 from mechsys.analysis.stability import ZERO_RE, assess, eigen, reduced_pencil
 from mechsys.errors import AnalysisError, InputError
 from mechsys.mechanics.model import MechanicalModel
@@ -173,13 +173,13 @@ def _rate_parameter(problem: EquilibriumProblem, coord: str) -> SweptParameter:
 
 
 def sweep(model: MechanicalModel, name: str, start: float, stop: float, points: int = 101,
-          search: dict | None = None) -> SweepResult:
+          search: dict | None = None, options=None) -> SweepResult:
     """Follow every equilibrium branch found at the ends and the middle of [start, stop] by pseudo-arclength
     continuation; stability from the eigenvalues; folds, branch points, Hopf points and eigenvalue collisions on
     the imaginary axis located on the way. NAME is a parameter or der(NAME) of a family of steady motions."""
     if start == stop:
         raise InputError(f"--sweep {name}: START and STOP must differ")
-    problem = EquilibriumProblem(model)
+    problem = make_problem(model, options)
     par = swept_parameter(problem, name)
     name = par.name  # der(NAME) spelled without spaces
     lo, hi = min(start, stop), max(start, stop)
@@ -386,10 +386,12 @@ def plot_sweep(result: SweepResult, path: str, coordinate: str | None = None) ->
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    if coordinate == "eigenvalues":
+        return _plot_eigenvalues(result, path, plt)
     if not result.names:
         raise InputError("nothing to plot: the system has no free coordinates")
     if coordinate is not None and coordinate not in result.names:
-        raise InputError(f"--plot-coordinate {coordinate}: choose from {', '.join(result.names)}")
+        raise InputError(f"--plot-coordinate {coordinate}: choose from {', '.join(result.names)} or eigenvalues")
     k = result.names.index(coordinate) if coordinate is not None else 0
     fig, ax = plt.subplots(figsize=(7, 4.5))
     for b, branch in enumerate(result.branches):
@@ -412,6 +414,34 @@ def plot_sweep(result: SweepResult, path: str, coordinate: str | None = None) ->
     ax.set_xlabel(result.parameter)
     ax.set_ylabel(result.names[k])
     ax.set_title("equilibrium branches (solid: stable, dashed: unstable, dotted: undecided)")
+    ax.grid(True, alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+
+
+def _plot_eigenvalues(result: SweepResult, path: str, plt) -> None:
+    """Real parts (solid) and imaginary parts (dotted) of the eigenvalues along each branch against the parameter
+    (the stability plot of the bicycle benchmark, Meijaard et al. 2007, Fig. 3); bifurcations marked on Re = 0."""
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    for b, branch in enumerate(result.branches):
+        ps = np.array([pt.p for pt in branch.points])
+        width = max((len(pt.eigenvalues) for pt in branch.points), default=0)
+        ev = np.full((len(ps), width), np.nan, dtype=complex)
+        for i, pt in enumerate(branch.points):
+            ev[i, :len(pt.eigenvalues)] = pt.eigenvalues
+        label = f"branch {b + 1}" if len(result.branches) > 1 else None
+        ax.plot(ps, ev.real, ".", color=f"C{b % 10}", ms=3, label=label)
+        ax.plot(ps, np.abs(ev.imag), ":", color=f"C{b % 10}", lw=1.0)
+    for bif in result.bifurcations:
+        ax.plot([bif["value"]], [0.0], "o", color="k", ms=5)
+        ax.annotate(bif["kind"], (bif["value"], 0.0), textcoords="offset points", xytext=(4, 4), fontsize=8)
+    ax.axhline(0, color="k", lw=0.6)
+    ax.set_xlabel(result.parameter)
+    ax.set_ylabel("eigenvalues: Re (dots), |Im| (dotted) [1/s]")
+    ax.set_title("eigenvalues along the branches")
+    if len(result.branches) > 1:
+        ax.legend(fontsize=8)
     ax.grid(True, alpha=0.3)
     fig.tight_layout()
     fig.savefig(path)

@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import sympy as sp
 
-from mechsys.errors import AnalysisError
+from mechsys.errors import AnalysisError, InputError
 from mechsys.mechanics.model import MechanicalModel
 from mechsys.numeric.lambdify import compile_exprs
 
@@ -54,6 +54,8 @@ class Equilibrium:
     critical: bool = False
     reason: str = ""
     chart: str = ""  # why the coordinates are a singular chart here ('' where they are regular): charts.py
+    structural: str = ""  # zero eigenvalues reported apart (nonholonomic: ignorable coordinates, families)
+    accelerations: dict[str, float] = field(default_factory=dict)  # of dependent ignorable speeds (nonholonomic)
 
     def to_dict(self) -> dict:
         return {
@@ -63,6 +65,7 @@ class Equilibrium:
             "stability": self.stability,
             "critical": self.critical,
             "reason": self.reason,
+            **({"structural_zeros": self.structural} if self.structural else {}),
         }
 
 
@@ -74,6 +77,7 @@ class EquilibriaResult:
     fixed_rates: dict[str, float] = field(default_factory=dict)
     search: SearchReport | None = None
     exhaustive: Exhaustive | None = None  # what the exhaustive mode computed (analysis/exhaustive.py)
+    formulation: str = ""  # nonholonomic: independent speeds, eliminated and ignorable coordinates
 
 
 class EquilibriumProblem:
@@ -147,6 +151,12 @@ class EquilibriumProblem:
         us = [self._u(c) for c in self.rate_unknowns]
         rows = [self.residual_exprs[self.model.coordinates.index(c)] for c in self.rate_unknowns]
         return all(sp.expand(sp.diff(r, a, b)) == 0 for r in rows for a in us for b in us)
+
+    def start(self, start: np.ndarray, p: np.ndarray) -> np.ndarray:
+        """The Newton start from drawn coordinates and rates: onto the constraints, the steady rates solved where
+        they enter linearly, the multipliers by least squares."""
+        start = self.solve_rates(_onto_constraints(self, start, p), p)
+        return np.concatenate([start, _multiplier_guess(self, start, p)])
 
     def solve_rates(self, start: np.ndarray, p: np.ndarray) -> np.ndarray:
         """``start`` with its steady rates solved from their linear equations at its coordinates (unchanged when
@@ -457,9 +467,7 @@ def solve_equilibria(problem: EquilibriumProblem, p: np.ndarray, search: dict | 
         candidates.append(_draw(plan, rng))
     roots: list[np.ndarray] = []
     for start in candidates:
-        start = problem.solve_rates(_onto_constraints(problem, start, p), p)
-        z0 = np.concatenate([start, _multiplier_guess(problem, start, p)])
-        z = _newton(problem, z0, p, roots)
+        z = _newton(problem, problem.start(start, p), p, roots)
         if z is None:
             continue
         z = problem.normalize(z)
@@ -515,14 +523,46 @@ def _multiplier_guess(problem: EquilibriumProblem, start: np.ndarray, p: np.ndar
     return np.linalg.lstsq(J, -F0, rcond=None)[0]
 
 
+@dataclass
+class SteadyOptions:
+    """How the steady motions of a nonholonomic system are posed (analysis/nonholonomic.py): coordinates held at
+    their file values (--given), given rates of families freed as unknowns (--solve), coordinates whose rates
+    must be independent speeds (--independent)."""
+
+    given: list[str] = field(default_factory=list)
+    solve: list[str] = field(default_factory=list)
+    independent: list[str] = field(default_factory=list)
+
+    def __bool__(self) -> bool:
+        return bool(self.given or self.solve or self.independent)
+
+
+def make_problem(model: MechanicalModel, options: SteadyOptions | None = None) -> EquilibriumProblem:
+    """The steady-motion equations of a model: holonomic (this module) or with velocity constraints
+    (analysis/nonholonomic.py)."""
+    options = options or SteadyOptions()
+    if model.is_holonomic:
+        if options:
+            raise InputError("--given, --solve and --independent pose the steady motions of nonholonomic systems "
+                             "(velocity constraints such as rolling); this model is holonomic")
+        return EquilibriumProblem(model)
+    from mechsys.analysis.nonholonomic import NonholonomicProblem
+
+    return NonholonomicProblem(model, options.given, options.solve, options.independent)
+
+
 def find_equilibria(model: MechanicalModel, search: dict[str, tuple[float, float]] | None = None,
-                    starts: int | None = None, seed: int = 0, exhaustive: bool = False) -> EquilibriaResult:
+                    starts: int | None = None, seed: int = 0, exhaustive: bool = False,
+                    options: SteadyOptions | None = None) -> EquilibriaResult:
     """Equilibria (and steady motions of cyclic coordinates) with their Lyapunov stability. exhaustive: every
     isolated root of polynomial sin/cos equations (analysis/exhaustive.py) instead of the multistart (search is
     then not used)."""
     from mechsys.analysis.stability import assess
 
-    problem = EquilibriumProblem(model)
+    problem = make_problem(model, options)
+    if exhaustive and not model.is_holonomic:
+        raise InputError("--exhaustive is not available for nonholonomic systems (the steady-motion equations "
+                         "carry accelerations and multipliers); use the multistart search")
     p = parameter_values(model)
     if not problem.unknowns:
         return _every_state(problem, p, search)
@@ -553,13 +593,15 @@ def find_equilibria(model: MechanicalModel, search: dict[str, tuple[float, float
     equilibria = [problem.equilibrium(z) for z in isolated]
     for e in equilibria:
         assess(problem, e, p)
-    equilibria, chart_note = review(problem, equilibria, p)
+    equilibria, chart_note = review(problem, equilibria, p) if model.is_holonomic else (equilibria, "")
     message = "; ".join(m for m in (message, chart_note) if m)
     equilibria.sort(key=lambda e: tuple(e.coordinates.values()) + tuple(e.rates.values()))
     if not equilibria:
         message = (f"no equilibrium found: {plan.text()}; widen it with --search" if plan is not None
                    else "no equilibrium: the equations have no real root (exhaustive search)")
-    return EquilibriaResult(equilibria, message, problem.cyclic, dict(problem.fixed_rates), plan, exact)
+    split = getattr(problem, "split", None)
+    return EquilibriaResult(equilibria, message, problem.cyclic, dict(problem.fixed_rates), plan, exact,
+                            split.text() if split is not None else "")
 
 
 def _every_state(problem: EquilibriumProblem, p: np.ndarray, search: dict | None) -> EquilibriaResult:

@@ -141,8 +141,10 @@ def reduce(model: MechanicalModel, lin: Linearization) -> tuple[ReducedSystem, l
     return ReducedSystem(M, C, K, base, names), condensed
 
 
-def vibration_modes(model: MechanicalModel, at: dict[str, float] | None = None) -> Modes:
+def vibration_modes(model: MechanicalModel, at: dict[str, float] | None = None, options=None) -> Modes:
     """Modes about ``at`` (polished to an exact equilibrium) or about the first stable equilibrium."""
+    if not model.is_holonomic:
+        return steady_modes(model, at, options)
     e = _equilibrium(model, at)
     lin = linearize(model, e)
     red, condensed = reduce(model, lin)
@@ -178,6 +180,56 @@ def vibration_modes(model: MechanicalModel, at: dict[str, float] | None = None) 
                 zeta[k] = 0.0
     names = list(lin.coordinates)
     return Modes(names, e, freqs, shapes, rigid, zeta, vals, condensed, unstable, red)
+
+
+def steady_modes(model: MechanicalModel, at: dict[str, float] | None = None, options=None) -> Modes:
+    """Modes of a nonholonomic steady motion (analysis/nonholonomic.py): one per eigenvalue of the reduced
+    linearization with Im >= 0 (structural zeros apart), natural frequency |lambda|, damping ratio -Re/|lambda|
+    (real roots: +-1), shapes on the independent shape coordinates (the eigenvector turned so that its largest
+    component is real and positive, then its real part; normalised to 1)."""
+    from mechsys.analysis.equilibria import make_problem
+    from mechsys.analysis.nonholonomic import linearize_steady
+    from mechsys.analysis.stability import assess
+
+    problem = make_problem(model, options)
+    p = parameter_values(model)
+    if at is None:
+        res = find_equilibria(model, options=options)
+        if not res.equilibria:
+            raise AnalysisError("no steady motion found to vibrate about; give one with --at")
+        stable = [e for e in res.equilibria if e.stability in ("asymptotically stable", "stable")]
+        e = (stable or res.equilibria)[0]
+    else:
+        unknown = set(at) - set(problem.free) - {f"der({c})" for c in problem.rate_unknowns}
+        if unknown:
+            raise InputError(f"--at: {', '.join(sorted(unknown))} is not a free shape coordinate "
+                             f"(choose from {', '.join(problem.free)})")
+        draw = np.array([at.get(c, model.doc.initial.get(c, 0.0)) for c in problem.free]
+                        + [at.get(f"der({c})", model.doc.initial_rate.get(c, 0.0)) for c in problem.rate_unknowns])
+        z = _polish(problem, problem.start(draw, p), p)
+        if z is None or np.linalg.norm(z[:len(draw)] - draw) > 1e-6 * (1 + np.linalg.norm(draw)):
+            raise AnalysisError("--at is not a steady motion (the steady-motion equations are not satisfied there)")
+        e = problem.equilibrium(z)
+        assess(problem, e, p)
+    lin = linearize_steady(problem, e, p)
+    nxi = len(lin.coordinates)
+    vals, vecs = np.linalg.eig(lin.jacobian)
+    chosen = []
+    for v in lin.eigenvalues:
+        if v.imag < -1e-12 * max(1.0, abs(v)):
+            continue
+        k = int(np.argmin(np.abs(vals - v)))
+        vec = vecs[:nxi, k]
+        j = int(np.argmax(np.abs(vec))) if nxi else 0
+        shape = np.real(vec * np.exp(-1j * np.angle(vec[j]))) if nxi and abs(vec[j]) > 0 else np.zeros(nxi)
+        top = float(np.max(np.abs(shape))) if nxi else 0.0
+        chosen.append((v, shape / top if top > 0 else shape))
+    freqs = np.array([abs(v) for v, _ in chosen])
+    zeta = np.array([-v.real / abs(v) if abs(v) > 0 else 0.0 for v, _ in chosen])
+    shapes = np.column_stack([s for _, s in chosen]) if chosen else np.zeros((nxi, 0))
+    unstable = sum(1 for v, _ in chosen if v.real > 1e-9 * max(1.0, abs(v)))
+    return Modes(list(lin.coordinates), e, freqs, shapes, [False] * len(chosen), zeta, lin.eigenvalues, [],
+                 unstable, None)
 
 
 def frf(model: MechanicalModel, modes: Modes, omegas: np.ndarray, inp: str, out: str) -> np.ndarray:

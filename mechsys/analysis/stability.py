@@ -19,7 +19,10 @@ ZERO_H = 1e-9
 def reduced_pencil(problem, e) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
     """(A, B) with B x' = A x for the reduced linearized state, and N (tangent basis) for constrained systems.
 
-    Unconstrained: state (non-cyclic q, all rates). Constrained: state (eta, eta') with q = q0 + N eta."""
+    Unconstrained: state (non-cyclic q, all rates). Constrained: state (eta, eta') with q = q0 + N eta.
+    Nonholonomic problems have their own (analysis/nonholonomic.py)."""
+    if hasattr(problem, "pencil"):
+        return problem.pencil(e)
     model = problem.model
     q, u = state_at(model, e.coordinates, e.rates)
     v = pieces(model).evaluate(q, u, np.array(e.multipliers), problem_parameters(problem))
@@ -110,6 +113,8 @@ def _massive_elsewhere(problem, names: list[str], p: np.ndarray) -> bool:
 
 def assess(problem, e, p: np.ndarray) -> None:
     """Fill eigenvalues, Jacobian and verdict of equilibrium ``e`` in place."""
+    if hasattr(problem, "assess"):
+        return problem.assess(e, p)
     problem.current_parameters = p
     A, B, _N = reduced_pencil(problem, e)
     if singular_pencil(A, B):

@@ -307,6 +307,12 @@ def verify_equilibrium(model: MechanicalModel, e: Equilibrium, options: VerifyOp
 def verify_equilibria(model: MechanicalModel, result: EquilibriaResult,
                       options: VerifyOptions | None = None) -> list[Verification]:
     """One Verification per equilibrium of ``result`` (same order)."""
+    if not model.is_holonomic:
+        from mechsys.errors import InputError
+
+        raise InputError("--verify is not available for nonholonomic steady motions yet (the perturbed starts "
+                         "would have to satisfy the rolling constraints); check a verdict with `mechsys simulate` "
+                         "from a perturbed file")
     if not result.equilibria:
         return []
     problem = EquilibriumProblem(model)

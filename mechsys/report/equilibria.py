@@ -32,6 +32,8 @@ def equilibria_tables(result: EquilibriaResult) -> list[Table]:
         t.notes.append(f"search: {result.search.text()}")
     if result.exhaustive is not None:
         t.notes.append(f"search: {result.exhaustive.text()}")
+    if result.formulation:
+        t.notes.append(f"nonholonomic steady motions: {result.formulation}")
     if result.fixed_rates:
         t.notes.append("steady motions form a family; rates fixed at the initial rate: "
                        + ", ".join(f"der({c}) = {fmt_number(v)}" for c, v in result.fixed_rates.items()))
@@ -73,6 +75,7 @@ def equilibria_payload(result: EquilibriaResult, bifurcations: list | None = Non
                                for e, v in zip(result.equilibria, verifications)]}
     payload = {"equilibria": [e.to_dict() for e in result.equilibria], "bifurcations": bifurcations or [],
                "message": result.message, "cyclic": result.cyclic,
+               **({"formulation": result.formulation} if result.formulation else {}),
                "search": result.search.to_dict() if result.search is not None else None}
     if result.exhaustive is not None:  # --exhaustive only
         payload["exhaustive"] = result.exhaustive.to_dict()
@@ -159,10 +162,48 @@ def modes_tables(modes) -> list[Table]:
               ["mode", "frequency [rad/s]", "frequency [Hz]", "damping ratio", "rigid body"])
     for k, (w, z, r) in enumerate(zip(modes.frequencies, modes.damping_ratios, modes.rigid_body), start=1):
         t.add(k, float(w), float(w / (2 * np.pi)), float(z), "yes" if r else "")
-    s = Table("mass-normalised mode shapes (columns)", ["coordinate"] + [f"mode {k}" for k in
-                                                                         range(1, len(modes.frequencies) + 1)])
+    title = ("mass-normalised mode shapes (columns)" if modes.system is not None
+             else "mode shapes (columns; independent shape coordinates, largest component 1, at phase 0)")
+    s = Table(title, ["coordinate"] + [f"mode {k}" for k in range(1, len(modes.frequencies) + 1)])
     for i, c in enumerate(modes.coordinates):
         s.add(c + (" (condensed)" if c in modes.condensed else ""), *[float(x) for x in modes.shapes[i]])
     if modes.unstable_modes:
         t.notes.append(f"{modes.unstable_modes} mode(s) with negative stiffness: the equilibrium is statically unstable")
     return [t, s]
+
+
+def steady_linearization_tables(lin, label: str, independent: list[str] | None, hurwitz: bool) -> list[Table]:
+    """Nonholonomic steady motion (analysis/nonholonomic.py): Kane's M, C, K over the independent speeds, the
+    kinematic rows, the first-order A and B; with --independent, the second-order form over those coordinates."""
+    tables = []
+    speeds = [f"der({c})" for c in lin.speeds]
+    if independent:
+        M, C, K = lin.second_order(independent)
+        for key, mat in (("M", M), ("C", C), ("K", K)):
+            tables.append(matrix_table(f"{label}: {key} over {', '.join(independent)} "
+                                       f"(M q'' + C q' + K q = generalized forces)", independent, mat))
+        n = len(independent)
+        Minv = np.linalg.inv(M)
+        A = np.block([[np.zeros((n, n)), np.eye(n)], [-Minv @ K, -Minv @ C]])
+        states = independent + [f"der({c})" for c in independent]
+        tables.append(matrix_table(f"{label}: A (state {', '.join(states)})", states, A))
+        tables.append(matrix_table(f"{label}: B (generalized forces)", independent, np.vstack([np.zeros((n, n)), Minv]),
+                                   states))
+    else:
+        tables.append(matrix_table(f"{label}: M (Kane's generalized mass over the independent speeds)", speeds, lin.M))
+        tables.append(matrix_table(f"{label}: C (rows: independent speeds)", speeds, lin.C))
+        if lin.coordinates:
+            tables.append(matrix_table(f"{label}: K (rows: independent speeds)", lin.coordinates, lin.K, speeds))
+            tables.append(matrix_table(f"{label}: kinematics d(xi)/dt = W xi + V nu: W", lin.coordinates, lin.W))
+            tables.append(matrix_table(f"{label}: kinematics: V", speeds, lin.V, lin.coordinates))
+        states = lin.states
+        t = matrix_table(f"{label}: A (state {', '.join(states)})", states, lin.jacobian)
+        if lin.structural:
+            t.notes.append(f"structural zero eigenvalues reported apart: {lin.structural_text()}")
+        tables.append(t)
+        n = len(lin.coordinates)
+        B = np.vstack([np.zeros((n, len(speeds))), np.linalg.inv(lin.M)])
+        tables.append(matrix_table(f"{label}: B (generalized forces along the independent speeds)", speeds, B, states))
+    if hurwitz:
+        tables += hurwitz_tables(None, label, lin.deflated)
+    return tables

@@ -1,0 +1,656 @@
+"""Steady motions of systems with velocity (rolling) constraints, linearized on the constraint manifold.
+
+The equations of motion are M a = f + A^T lambda with the velocity constraints g(q, u) = A u + c = 0 (holonomic
+rows are Phi_q u, and Phi(q) = 0 holds as well). A steady motion is a motion in which the *shape* (every
+coordinate the reduced equations depend on) is constant and the independent speeds are constant, while the
+*ignorable* coordinates (position on the ground, heading, wheel angles: coordinates the reduced equations do not
+depend on) drift. It is found as a root of the augmented equations
+
+    R = M a - f - A^T lambda = 0,   S = A a - b = 0,   g(q, u) = 0,   Phi(q) = 0
+
+with the shape rates zero, the independent accelerations zero and the ignorable coordinates at 0 (they do not
+matter): the unknowns are the shape coordinates, the rates of the ignorable coordinates (the independent ones are
+the given rates of a family of steady motions, fixed at the file's values, unless ``--solve`` frees them), the
+accelerations of the dependent ignorable speeds (a disk rolling in a circle turns its velocity) and the
+multipliers. Every derivative is exact (symbolic Jacobians of R, S, g, Phi, compiled once).
+
+The linearization uses independent coordinates and speeds: holonomic constraints eliminated at position level,
+velocity constraints at velocity level, the accelerations from the differentiated saddle-point system
+[M -A^T; A 0] [da; dlam] = -[dR; dS]. Its state is (independent shape coordinates, independent speeds); the
+ignorable coordinates' zero eigenvalues are structural and reported apart, and so is the zero eigenvalue of each
+family of steady motions (its direction is the family's tangent, deflated exactly).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from functools import cached_property
+
+import numpy as np
+import sympy as sp
+
+from mechsys.analysis.equilibria import Equilibrium, EquilibriumProblem, parameter_values, wrap
+from mechsys.errors import AnalysisError, InputError
+from mechsys.mechanics.model import MechanicalModel
+from mechsys.numeric.lambdify import compile_exprs
+
+#: relative size below which a column, a singular value or a shift difference counts as zero
+ZERO = 1e-9
+
+
+# ----------------------------------------------------------------------------------------- compiled pieces
+class ConstrainedPieces:
+    """E = [R; S; g; Phi] and dE/dq, dE/du, M, A compiled as one function of (q, u, a, lambda, p) at t = 0."""
+
+    def __init__(self, model: MechanicalModel, method: str) -> None:
+        eq = model.equations(method)
+        rows = model.kin.constraints
+        self.names = list(model.coordinates)
+        self.n, self.m = len(model.q), len(rows)
+        self.mh = sum(1 for r in rows if r.kind == "holonomic")
+        self.lam = list(sp.symbols(f"lambda1:{self.m + 1}", real=True)) if self.m else []
+        t0 = {model.t: 0}
+        a = sp.Matrix(model.a)
+        R = eq.M * a - eq.f - (eq.A.T * sp.Matrix(self.lam) if self.m else sp.zeros(self.n, 1))
+        S = eq.A * a - eq.b
+        g = sp.Matrix([r.velocity for r in rows])
+        Phi = sp.Matrix([r.position for r in rows if r.kind == "holonomic"])
+        E = sp.Matrix(list(R) + list(S) + list(g) + list(Phi)).xreplace(t0)
+        self.size = E.shape[0]
+        blocks = [("E", E), ("Eq", E.jacobian(model.q)), ("Eu", E.jacobian(model.u)),
+                  ("M", eq.M.xreplace(t0)), ("A", eq.A.xreplace(t0))]
+        exprs: list = []
+        self.layout = {}
+        for key, mat in blocks:
+            self.layout[key] = (len(exprs), mat.shape)
+            exprs += list(mat)
+        self.args = [*model.q, *model.u, *model.a, *self.lam, *model.parameter_symbols]
+        self._fn = compile_exprs(exprs, self.args)
+
+    def evaluate(self, q, u, a, lam, p) -> dict[str, np.ndarray]:
+        out = np.asarray(self._fn(*q, *u, *a, *lam, *p), dtype=float)
+        v = {key: out[s:s + shape[0] * shape[1]].reshape(shape) for key, (s, shape) in self.layout.items()}
+        v["E"] = v["E"].ravel()
+        return v
+
+    def accelerations(self, q, u, p) -> tuple[np.ndarray, np.ndarray]:
+        """a and lambda of the saddle-point system M a - A^T lambda = f, A a = b."""
+        n, m = self.n, self.m
+        v = self.evaluate(q, u, np.zeros(n), np.zeros(m), p)
+        K = np.block([[v["M"], -v["A"].T], [v["A"], np.zeros((m, m))]])
+        rhs = -np.concatenate([v["E"][:n], v["E"][n:n + m]])
+        x = np.linalg.solve(K, rhs)
+        return x[:n], x[n:]
+
+
+def constrained_pieces(model: MechanicalModel, method: str = "kane") -> ConstrainedPieces:
+    """The model's ConstrainedPieces for a formulation, built once per model object (shared by sweep copies)."""
+    store = model.__dict__.setdefault("_constrained_pieces", {})
+    if method not in store:
+        store[method] = ConstrainedPieces(model, method)
+    return store[method]
+
+
+# ----------------------------------------------------------------------------------------- the split
+@dataclass
+class Split:
+    """Which speeds and coordinates are independent, and which coordinates are ignorable."""
+
+    independent: list[str]  # coordinates whose rates are the independent speeds
+    dependent: list[str]  # coordinates whose rates the velocity constraints give
+    eliminated: list[str]  # coordinates the holonomic constraints give (position level)
+    ignorable: list[str]  # the reduced equations do not depend on them
+    shape: list[str]  # the others: constant in a steady motion
+
+    def text(self) -> str:
+        parts = [f"independent speeds der({'), der('.join(self.independent)})" if self.independent
+                 else "no independent speeds"]
+        if self.eliminated:
+            parts.append(f"{', '.join(self.eliminated)} eliminated by the holonomic constraints")
+        if self.ignorable:
+            parts.append(f"ignorable: {', '.join(self.ignorable)}")
+        return "; ".join(parts)
+
+
+def _greedy(columns: np.ndarray, order: list[int], need: int) -> list[int]:
+    """Columns (in preference order) that each raise the rank, until ``need`` are chosen."""
+    chosen: list[int] = []
+    scale = max(1e-300, float(np.max(np.abs(columns)))) if columns.size else 1.0
+    for j in order:
+        if len(chosen) == need:
+            break
+        trial = columns[:, chosen + [j]]
+        sv = np.linalg.svd(trial, compute_uv=False)
+        if sv[-1] > 1e-7 * scale:
+            chosen.append(j)
+    return chosen
+
+
+def choose_split(model: MechanicalModel, pieces: ConstrainedPieces, q0: np.ndarray, p: np.ndarray,
+                 independent: list[str] | None = None) -> Split:
+    """Dependent speeds by rank at q0 in the order: massless coordinates, coordinates that appear nowhere but
+    in rates (translations first, then angles from the last), then the rest in file order; never one the user
+    named independent. Holonomic dependents among the dependent speeds' coordinates. Then the ignorable ones."""
+    names = model.coordinates
+    n, m, mh = pieces.n, pieces.m, pieces.mh
+    forced = list(independent or [])
+    for c in forced:
+        if c not in names:
+            raise InputError(f"--independent {c}: unknown coordinate{model.doc.suggest(c, names)}")
+    v = pieces.evaluate(q0, np.zeros(n), np.zeros(n), np.zeros(m), p)
+    M, A = v["M"], v["A"]
+    Mscale = max(1e-300, float(np.max(np.abs(M))))
+    massless = [i for i in range(n) if np.max(np.abs(M[i])) <= 1e-12 * Mscale]
+    eq = model.equations("kane") if "kane" in model._eqs else model.equations("lagrange")
+    used = set().union(eq.M.free_symbols, eq.f.free_symbols, model.holonomic_constraints.free_symbols)
+    absent = [i for i in range(n) if model.q[i] not in used and i not in massless]
+    translations = [i for i in absent if not model.angles.get(names[i], False)]
+    angles = [i for i in reversed(absent) if model.angles.get(names[i], False)]
+    order = massless + translations + angles + [i for i in range(n) if i not in massless + absent]
+    order = [i for i in order if names[i] not in forced]
+    dep = _greedy(A, order, m)
+    if len(dep) < m:
+        why = (f" with {', '.join(forced)} independent" if forced else "")
+        raise AnalysisError(f"the velocity constraints cannot be solved for {m} dependent speeds at the initial "
+                            f"state{why} (redundant or singular constraint rows there)")
+    elim: list[int] = []
+    if mh:
+        Phi_q = v["Eq"][n + 2 * m:, :]
+        elim = _greedy(Phi_q, [i for i in order if i in dep] + [i for i in order if i not in dep], mh)
+        if len(elim) < mh:
+            raise AnalysisError("the holonomic constraints cannot be solved for dependent coordinates at the "
+                                "initial state (redundant or singular rows there)")
+    indep = [i for i in range(n) if i not in dep]
+    split = Split([names[i] for i in indep], [names[i] for i in dep], [names[i] for i in elim], [], [])
+    ignorable = _ignorable(model, pieces, split, p)
+    split.ignorable = [c for c in names if c in ignorable]
+    split.shape = [c for c in names if c not in ignorable]
+    return split
+
+
+def _ignorable(model: MechanicalModel, pieces: ConstrainedPieces, split: Split, p: np.ndarray) -> set[str]:
+    """Coordinates whose shift leaves the reduced equations (the other rates and the independent accelerations,
+    with the dependent speeds solved from the constraints) unchanged at random states on the constraints."""
+    names = model.coordinates
+    n, m = pieces.n, pieces.m
+    rng = np.random.default_rng(17)
+    states = []
+    for _ in range(3):
+        q = rng.uniform(-0.6, 0.6, n)
+        q = _onto_holonomic(pieces, split, q, p)
+        if q is None:
+            continue
+        states.append((q, rng.uniform(-1.0, 1.0, len(split.independent))))
+    if not states:
+        return set()
+    v0 = pieces.evaluate(states[0][0], np.zeros(n), np.zeros(n), np.zeros(m), p)
+    Phi_q = v0["Eq"][n + 2 * m:, :]
+    candidates = [c for i, c in enumerate(names) if c not in split.eliminated
+                  and not (Phi_q.size and np.max(np.abs(Phi_q[:, i])) > 0)]
+    found = set()
+    for c in candidates:
+        k = names.index(c)
+        others = [i for i in range(n) if names[i] not in candidates]
+        same = True
+        for q, uI in states:
+            base = _quotient(pieces, split, q, uI, p, others)
+            shifted = q.copy()
+            shifted[k] += rng.uniform(0.5, 1.5)
+            moved = _quotient(pieces, split, shifted, uI, p, others)
+            if base is None or moved is None or np.max(np.abs(base - moved)) > ZERO * (1 + np.max(np.abs(base))):
+                same = False
+                break
+        if same:
+            found.add(c)
+    return found
+
+
+def speeds(pieces: ConstrainedPieces, split: Split, names: list[str], q: np.ndarray, uI: np.ndarray,
+           p: np.ndarray) -> np.ndarray:
+    """All rates from the independent ones: A_D u_D = -(A_I u_I + c)."""
+    n, m = pieces.n, pieces.m
+    I = [names.index(c) for c in split.independent]
+    D = [names.index(c) for c in split.dependent]
+    u = np.zeros(n)
+    u[I] = uI
+    v = pieces.evaluate(q, u, np.zeros(n), np.zeros(m), p)
+    g = v["E"][n + m:n + 2 * m]  # A_I u_I + c (u_D = 0 here)
+    u[D] = np.linalg.solve(v["A"][:, D], -g)
+    return u
+
+
+def _quotient(pieces, split, q, uI, p, others) -> np.ndarray | None:
+    names_all = pieces.names
+    try:
+        u = speeds(pieces, split, names_all, q, uI, p)
+        a, _lam = pieces.accelerations(q, u, p)
+    except np.linalg.LinAlgError:
+        return None
+    I = [names_all.index(c) for c in split.independent]
+    return np.concatenate([u[others], a[I]])
+
+
+def _onto_holonomic(pieces: ConstrainedPieces, split: Split, q: np.ndarray, p: np.ndarray) -> np.ndarray | None:
+    """q with its eliminated coordinates moved onto Phi = 0 (Newton), None if that fails."""
+    if not pieces.mh:
+        return q
+    names = pieces.names
+    n, m = pieces.n, pieces.m
+    D = [names.index(c) for c in split.eliminated]
+    q = q.copy()
+    for _ in range(40):
+        v = pieces.evaluate(q, np.zeros(n), np.zeros(n), np.zeros(m), p)
+        phi = v["E"][n + 2 * m:]
+        if np.max(np.abs(phi)) < 1e-13:
+            return q
+        J = v["Eq"][n + 2 * m:, :][:, D]
+        try:
+            q[D] -= np.linalg.solve(J, phi)
+        except np.linalg.LinAlgError:
+            return None
+    return q if np.max(np.abs(phi)) < 1e-10 else None
+
+
+# ----------------------------------------------------------------------------------------- steady motions
+class NonholonomicProblem(EquilibriumProblem):
+    """The augmented steady-motion equations (see the module docstring) with the interface of EquilibriumProblem
+    (multistart, continuation and sweeps use it unchanged)."""
+
+    def __init__(self, model: MechanicalModel, given: list[str] | None = None, solve: list[str] | None = None,
+                 independent: list[str] | None = None, method: str = "kane") -> None:
+        self.model = model
+        if not model.is_autonomous(method):
+            raise AnalysisError("the equations depend explicitly on time (non-autonomous): there are no "
+                                "steady motions in the ordinary sense")
+        self.method = method
+        self.pieces = constrained_pieces(model, method)
+        names = model.coordinates
+        p = parameter_values(model)
+        q0 = np.array([model.doc.initial.get(c, 0.0) for c in names], dtype=float)
+        self.split = _cached_split(model, self.pieces, q0, p, independent)
+        split = self.split
+        self.angles = model.angles
+        self.n, self.m, self.mh = self.pieces.n, self.pieces.m, self.pieces.mh
+        given = list(given or [])
+        for c in given:
+            if c not in names:
+                raise InputError(f"--given {c}: unknown coordinate{model.doc.suggest(c, names)}")
+            if c in split.ignorable:
+                raise InputError(f"--given {c}: {c} is ignorable (the reduced equations do not depend on it), so "
+                                 "its value does not select a steady motion")
+            if c in split.eliminated:
+                raise InputError(f"--given {c}: {c} follows from the holonomic constraints; give an independent "
+                                 "coordinate instead")
+        self.given = {c: float(model.doc.initial.get(c, 0.0)) for c in given}
+        group = [c for c in split.independent if c in split.ignorable]
+        freed = []
+        for item in solve or []:
+            c = item[4:-1].strip() if item.startswith("der(") and item.endswith(")") else item
+            if c not in group:
+                raise InputError(f"--solve {item}: not the independent rate of an ignorable coordinate (choose "
+                                 f"from {', '.join(f'der({g})' for g in group) or 'none'})")
+            freed.append(c)
+        self.free = [c for c in split.shape if c not in self.given]
+        self.nq = len(self.free)
+        self.cyclic = list(split.ignorable)
+        self.rate_unknowns = [c for c in group if c in freed]
+        self.fixed_rates = {c: float(model.doc.initial_rate.get(c, 0.0)) for c in group if c not in freed}
+        self.dependent_rates = [c for c in split.dependent if c in split.ignorable]
+        self.lam = tuple(self.pieces.lam)
+        self._index = {c: i for i, c in enumerate(names)}
+        if len(self.free) + len(self.rate_unknowns) == 0:
+            raise InputError("nothing is left to solve for: every shape coordinate is --given and no rate is freed "
+                             "with --solve")
+
+    # the base class's symbolic residual is replaced by the compiled augmented one
+    @cached_property
+    def unknowns(self) -> list[str]:
+        return self.unknown_names
+
+    @cached_property
+    def unknown_names(self) -> list[str]:
+        return (list(self.free) + [f"der({c})" for c in self.rate_unknowns]
+                + [f"der({c})" for c in self.dependent_rates] + [f"der(der({c}))" for c in self.dependent_rates]
+                + [str(s) for s in self.lam])
+
+    @cached_property
+    def linear_rates(self) -> bool:
+        return False
+
+    # ------------------------------------------------------------------------------------- state maps
+    def full_state(self, z: np.ndarray, values: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(q, u, a, lambda) of the unknown vector z; values=False: of a direction (given values left at 0)."""
+        ix = self._index
+        q, u, a = np.zeros(self.n), np.zeros(self.n), np.zeros(self.n)
+        for c, val in self.given.items():
+            q[ix[c]] = val if values else 0.0
+        k = 0
+        for c in self.free:
+            q[ix[c]] = z[k]
+            k += 1
+        for c in self.rate_unknowns:
+            u[ix[c]] = z[k]
+            k += 1
+        for c, val in self.fixed_rates.items():
+            u[ix[c]] = val if values else 0.0
+        for c in self.dependent_rates:
+            u[ix[c]] = z[k]
+            k += 1
+        for c in self.dependent_rates:
+            a[ix[c]] = z[k]
+            k += 1
+        return q, u, a, np.asarray(z[k:k + self.m], dtype=float)
+
+    def _columns(self, v: dict) -> np.ndarray:
+        """dE/dz from dE/dq, dE/du and the blocks of a and lambda."""
+        ix = self._index
+        n, m = self.n, self.m
+        Ea = np.zeros((self.pieces.size, n))
+        Ea[:n] = v["M"]
+        Ea[n:n + m] = v["A"]
+        El = np.zeros((self.pieces.size, m))
+        El[:n] = -v["A"].T
+        cols = [v["Eq"][:, ix[c]] for c in self.free] + [v["Eu"][:, ix[c]] for c in self.rate_unknowns]
+        cols += [v["Eu"][:, ix[c]] for c in self.dependent_rates] + [Ea[:, ix[c]] for c in self.dependent_rates]
+        out = np.column_stack(cols) if cols else np.zeros((self.pieces.size, 0))
+        return np.hstack([out, El]) if m else out
+
+    def _at(self, z: np.ndarray, p: np.ndarray) -> dict:
+        return self.pieces.evaluate(*self.full_state(z), p)
+
+    def F(self, z: np.ndarray, p: np.ndarray) -> np.ndarray:
+        return self._at(z, p)["E"]
+
+    def J(self, z: np.ndarray, p: np.ndarray) -> np.ndarray:
+        return self._columns(self._at(z, p))
+
+    def Fr(self, z: np.ndarray, p: np.ndarray) -> np.ndarray:
+        v = self._at(z, p)
+        cols = [v["Eu"][:, self._index[c]] for c in self.fixed_rates]
+        return np.column_stack(cols) if cols else np.zeros((self.pieces.size, 0))
+
+    def Fp(self, z: np.ndarray, p: np.ndarray) -> np.ndarray:
+        """dF/dp by central differences (the parameters enter M, f and the constraints everywhere; the exact
+        Jacobian would double the symbolic work for a predictor step)."""
+        out = np.zeros((self.pieces.size, len(p)))
+        for k in range(len(p)):
+            h = 1e-6 * max(1.0, abs(p[k]))
+            hi, lo = p.copy(), p.copy()
+            hi[k] += h
+            lo[k] -= h
+            out[:, k] = (self.F(z, hi) - self.F(z, lo)) / (2 * h)
+        return out
+
+    def extra(self) -> list[float]:
+        return []
+
+    def start(self, start: np.ndarray, p: np.ndarray) -> np.ndarray:
+        """A start of the Newton iteration from drawn shape coordinates and free rates: the shape moved onto the
+        holonomic constraints, the dependent rates solved from the velocity constraints, the dependent
+        accelerations and the multipliers by least squares."""
+        k = self.nq + len(self.rate_unknowns)
+        z = np.concatenate([start[:k], np.zeros(2 * len(self.dependent_rates) + self.m)])
+        n, m = self.n, self.m
+        if self.mh:
+            for _ in range(30):
+                v = self._at(z, p)
+                phi = v["E"][n + 2 * m:]
+                Jq = self._columns(v)[n + 2 * m:, :self.nq]
+                if not (np.all(np.isfinite(phi)) and np.all(np.isfinite(Jq))):
+                    break
+                if np.max(np.abs(phi)) <= 1e-13:
+                    break
+                z[:self.nq] += np.linalg.lstsq(Jq, -phi, rcond=None)[0]
+        nd = len(self.dependent_rates)
+        if nd:
+            v = self._at(z, p)
+            cols = self._columns(v)[n + m:n + 2 * m, k:k + nd]
+            z[k:k + nd] += np.linalg.lstsq(cols, -v["E"][n + m:n + 2 * m], rcond=None)[0]
+        v = self._at(z, p)
+        tail = self._columns(v)[:n + m, k + nd:]
+        z[k + nd:] += np.linalg.lstsq(tail, -v["E"][:n + m], rcond=None)[0]
+        return z
+
+    def equilibrium(self, z: np.ndarray) -> Equilibrium:
+        z = self.normalize(z)
+        q, u, a, lam = self.full_state(z)
+        ix = self._index
+        coords = {c: float(q[ix[c]]) for c in self.split.shape}
+        for c in coords:
+            if self.angles.get(c, False):
+                coords[c] = wrap(coords[c])
+        rates = {c: float(u[ix[c]]) for c in self.split.ignorable}
+        e = Equilibrium(coords, rates, [float(x) for x in lam])
+        e.accelerations = {c: float(a[ix[c]]) for c in self.dependent_rates}
+        return e
+
+    def state(self, e: Equilibrium) -> np.ndarray:
+        acc = getattr(e, "accelerations", {})
+        return np.array([e.coordinates[c] for c in self.free] + [e.rates[c] for c in self.rate_unknowns]
+                        + [e.rates[c] for c in self.dependent_rates] + [acc.get(c, 0.0) for c in self.dependent_rates]
+                        + list(e.multipliers), dtype=float)
+
+    def point(self, e: Equilibrium) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(q, u, a, lambda) of a steady motion (ignorable coordinates at 0)."""
+        return self.full_state(self.state(e))
+
+    # ------------------------------------------------------------------------------------- linearization
+    def pencil(self, e: Equilibrium) -> tuple[np.ndarray, np.ndarray, None]:
+        """(A, I): the reduced Jacobian with the structural zero directions removed (continuation's eigenvalues)."""
+        lin = linearize_steady(self, e, getattr(self, "current_parameters", None))
+        return lin.deflated, np.eye(lin.deflated.shape[0]), None
+
+    def assess(self, e: Equilibrium, p: np.ndarray) -> None:
+        self.current_parameters = p
+        lin = linearize_steady(self, e, p)
+        vals = lin.eigenvalues
+        e.eigenvalues, e.jacobian = vals, lin.jacobian
+        e.structural = lin.structural_text()
+        scale = max(1.0, float(np.max(np.abs(vals)))) if len(vals) else 1.0
+        tol = 1e-9 * scale
+        e.critical = bool(len(vals) and np.min(np.abs(vals.real)) <= tol)
+        apart = f" ({lin.structural_text()} apart)" if lin.structural else ""
+        if len(vals) and np.max(vals.real) > tol:
+            e.stability, e.reason = "unstable", f"an eigenvalue has a positive real part{apart}"
+        elif len(vals) == 0 or np.max(vals.real) < -tol:
+            e.stability, e.reason = ("asymptotically stable",
+                                     f"all eigenvalues have negative real parts{apart}: the shape and the speeds "
+                                     "return to the steady motion; the ignorable coordinates keep an offset")
+        else:
+            zero = int(np.sum(np.abs(vals.real) <= tol))
+            e.stability = "undecided"
+            e.reason = (f"{zero} eigenvalue(s) with zero real part (critical case){apart}; the energy arguments "
+                        "of holonomic systems do not apply to nonholonomic ones")
+            if _conservative(self, p) and _simple_imaginary(vals, tol):
+                e.stability = "stable"
+                e.reason = (f"{zero} eigenvalue(s) with zero real part{apart}; conservative system with a purely "
+                            "oscillatory, simple spectrum: stable in the linear sense")
+
+
+def _conservative(problem: NonholonomicProblem, p: np.ndarray) -> bool:
+    model = problem.model
+    Q = model.generalized_forces
+    if Q == sp.zeros(*Q.shape):
+        return True
+    fn = compile_exprs(list(Q.xreplace({model.t: 0})), list(model.q) + list(model.u) + list(model.parameter_symbols))
+    rng = np.random.default_rng(9)
+    n = len(model.q)
+    return all(np.max(np.abs(fn(*rng.uniform(-2, 2, 2 * n), *p))) <= 1e-12 for _ in range(3))
+
+
+def _simple_imaginary(vals: np.ndarray, tol: float) -> bool:
+    if not len(vals) or np.max(np.abs(vals.real)) > tol:
+        return False
+    tiny = 1e-6 * max(1.0, float(np.max(np.abs(vals))))
+    if np.any(np.abs(vals) <= tiny):
+        return False
+    osc = sorted(abs(v.imag) for v in vals if v.imag > 0)
+    return not any(abs(a - b) <= 1e-7 * max(1.0, a) for a, b in zip(osc[1:], osc[:-1]))
+
+
+def _cached_split(model, pieces, q0, p, independent) -> Split:
+    """The split is chosen once per model object, initial configuration, parameter values and --independent."""
+    store = model.__dict__.setdefault("_nonholonomic_split", {})
+    key = (tuple(independent or ()), tuple(np.round(q0, 12)), tuple(np.round(p, 12)))
+    if key not in store:
+        store[key] = choose_split(model, pieces, q0, p, independent)
+    return store[key]
+
+
+# ----------------------------------------------------------------------------------------- linearization
+@dataclass
+class SteadyLinearization:
+    """Linear equations about a steady motion in independent shape coordinates xi and independent speeds nu:
+    xi' = W xi + V nu (kinematics), Mr nu' + C nu + K xi = B tau (Kane's form: rows are the independent speeds,
+    tau the generalized forces along them). ``jacobian`` is the first-order matrix of (xi, nu); ``deflated`` is
+    it with the structural zero directions of the families removed (the ignorable coordinates are not states)."""
+
+    coordinates: list[str]  # xi: independent shape coordinates
+    speeds: list[str]  # nu: independent speeds (coordinate names)
+    jacobian: np.ndarray
+    deflated: np.ndarray
+    eigenvalues: np.ndarray
+    M: np.ndarray
+    C: np.ndarray
+    K: np.ndarray
+    W: np.ndarray
+    V: np.ndarray
+    ignorable: list[str]
+    families: list[str]  # der(rate) or coordinate given, whose family direction was deflated
+    undeflated: list[str] = field(default_factory=list)  # those whose direction is not a zero eigenvector
+
+    @property
+    def structural(self) -> list[str]:
+        return list(self.ignorable) + list(self.families)
+
+    def structural_text(self) -> str:
+        parts = []
+        if self.ignorable:
+            parts.append(f"{len(self.ignorable)} structural zero eigenvalue(s) of the ignorable coordinates "
+                         f"{', '.join(self.ignorable)}")
+        if self.families:
+            parts.append(f"{len(self.families)} of the family of steady motions along {', '.join(self.families)}")
+        return " and ".join(parts)
+
+    @property
+    def states(self) -> list[str]:
+        return list(self.coordinates) + [f"der({c})" for c in self.speeds]
+
+    def second_order(self, names: list[str]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """M, C, K over the coordinates ``names`` (their rates must be independent speeds and their equations must
+        not involve the other states): the form M q'' + C q' + K q = tau of a benchmark."""
+        for c in names:
+            if c not in self.coordinates or c not in self.speeds:
+                raise InputError(f"--independent {c}: not an independent shape coordinate whose rate is an "
+                                 f"independent speed here (shape: {', '.join(self.coordinates) or 'none'}; speeds: "
+                                 f"{', '.join(self.speeds)})")
+        xi = [self.coordinates.index(c) for c in names]
+        nu = [self.speeds.index(c) for c in names]
+        others_xi = [k for k in range(len(self.coordinates)) if k not in xi]
+        others_nu = [k for k in range(len(self.speeds)) if k not in nu]
+        rows = self.jacobian[len(self.coordinates) + np.array(nu, dtype=int)] if nu else np.zeros((0, 0))
+        scale = max(1.0, float(np.max(np.abs(self.jacobian))))
+        coupled = [self.coordinates[k] for k in others_xi if np.max(np.abs(rows[:, k])) > 1e-10 * scale]
+        coupled += [f"der({self.speeds[k]})" for k in others_nu
+                    if np.max(np.abs(rows[:, len(self.coordinates) + k])) > 1e-10 * scale]
+        if coupled:
+            raise AnalysisError(f"the equations of {', '.join(names)} involve {', '.join(coupled)} at this steady "
+                                "motion: there is no second-order form over these coordinates alone; list those "
+                                "too with --independent, or read the first-order matrix A")
+        return (self.M[np.ix_(nu, nu)], self.C[np.ix_(nu, nu)], self.K[np.ix_(nu, xi)])
+
+
+def linearize_steady(problem: NonholonomicProblem, e: Equilibrium, p: np.ndarray | None = None) -> SteadyLinearization:
+    """The linearization about a steady motion on the constraint manifold (module docstring)."""
+    p = parameter_values(problem.model) if p is None else p
+    pieces, split = problem.pieces, problem.split
+    names = pieces.names
+    n, m, mh = pieces.n, pieces.m, pieces.mh
+    q, u, a, lam = problem.point(e)
+    v = pieces.evaluate(q, u, a, lam, p)
+    Eq, Eu, M, A = v["Eq"], v["Eu"], v["M"], v["A"]
+    I = [names.index(c) for c in split.independent]
+    D = [names.index(c) for c in split.dependent]
+    # accelerations from the differentiated saddle-point system
+    K = np.block([[M, -A.T], [A, np.zeros((m, m))]])
+    try:
+        Pq = -np.linalg.solve(K, Eq[:n + m])[:n]
+        Pu = -np.linalg.solve(K, Eu[:n + m])[:n]
+        AD = A[:, D]
+        Uq = np.zeros((n, n))
+        UI = np.zeros((n, len(I)))
+        UI[I, range(len(I))] = 1.0
+        if m:
+            Uq[D] = -np.linalg.solve(AD, Eq[n + m:n + 2 * m])
+            UI[D] = -np.linalg.solve(AD, A[:, I])
+        keep = [i for i in range(n) if names[i] not in split.eliminated]
+        Qm = np.zeros((n, len(keep)))
+        Qm[keep, range(len(keep))] = 1.0
+        if mh:
+            E = [names.index(c) for c in split.eliminated]
+            Phi_q = Eq[n + 2 * m:]
+            Qm[E] = -np.linalg.solve(Phi_q[:, E], Phi_q[:, keep])
+    except np.linalg.LinAlgError:
+        raise AnalysisError("the constraints or the saddle-point system are singular at this steady motion: "
+                            "choose other independent speeds with --independent") from None
+    dq_dxi = Uq @ Qm  # rates per independent coordinate
+    rows_q = [names.index(c) for c in split.shape if c not in split.eliminated]
+    cols_all = [keep.index(i) for i in rows_q]
+    cols_ign = [keep.index(names.index(c)) for c in split.ignorable]
+    top = np.hstack([dq_dxi[rows_q][:, cols_all], UI[rows_q]])
+    acc_q = (Pq @ Qm + Pu @ dq_dxi)[I]
+    bottom = np.hstack([acc_q[:, cols_all], (Pu @ UI)[I]])
+    Jw = np.vstack([top, bottom])
+    # the ignorable coordinates must not enter: their columns vanish (a check of the split)
+    ign = np.vstack([dq_dxi[rows_q][:, cols_ign], acc_q[:, cols_ign]]) if cols_ign else np.zeros((0, 0))
+    scale = max(1.0, float(np.max(np.abs(Jw)))) if Jw.size else 1.0
+    if ign.size and np.max(np.abs(ign)) > 1e-7 * scale:
+        raise AnalysisError("the reduced equations depend on an ignorable coordinate at this steady motion "
+                            "(internal check of the split failed)")
+    Mr = UI.T @ M @ UI
+    nxi = len(rows_q)
+    Kf, Cf = -Mr @ Jw[nxi:, :nxi], -Mr @ Jw[nxi:, nxi:]
+    families, undeflated, deflated = _deflate(problem, e, p, Jw, [names[i] for i in rows_q], split.independent)
+    vals = np.linalg.eigvals(deflated) if deflated.size else np.zeros(0, complex)
+    vals = vals[np.lexsort((vals.imag, vals.real))]
+    return SteadyLinearization([names[i] for i in rows_q], list(split.independent), Jw, deflated, vals,
+                               Mr, Cf, Kf, Jw[:nxi, :nxi], Jw[:nxi, nxi:], list(split.ignorable), families,
+                               undeflated)
+
+
+def _deflate(problem: NonholonomicProblem, e: Equilibrium, p: np.ndarray, Jw: np.ndarray, xi: list[str],
+             nu: list[str]) -> tuple[list[str], list[str], np.ndarray]:
+    """Remove the zero eigenvalue of each family of steady motions exactly: its direction t (the derivative of the
+    steady motion along a given rate or a --given coordinate, from the steady-motion equations) satisfies
+    Jw t = 0; in the basis [t, complement] the first columns vanish and the rest is the deflated matrix."""
+    given = [f"der({c})" for c in problem.fixed_rates] + list(problem.given)
+    if not given or not Jw.size:
+        return [], [], Jw
+    z = problem.state(e)
+    v = problem._at(z, p)
+    Jz = problem._columns(v)
+    ix = problem._index
+    rhs = np.column_stack([v["Eu"][:, ix[c]] for c in problem.fixed_rates]
+                          + [v["Eq"][:, ix[c]] for c in problem.given])
+    dz = -np.linalg.lstsq(Jz, rhs, rcond=None)[0] if Jz.size else np.zeros((0, rhs.shape[1]))
+    tangents, families, undeflated = [], [], []
+    scale = max(1.0, float(np.max(np.abs(Jw))))
+    for j, name in enumerate(given):
+        dq, du, _da, _dl = problem.full_state(dz[:, j], values=False)
+        if name.startswith("der("):
+            du[ix[name[4:-1]]] = 1.0  # along the given rate itself
+        else:
+            dq[ix[name]] = 1.0  # along the given coordinate itself
+        t = np.concatenate([[dq[ix[x]] for x in xi], [du[ix[s]] for s in nu]])
+        if np.linalg.norm(Jw @ t) <= 1e-8 * scale * max(1e-300, np.linalg.norm(t)):
+            tangents.append(t / np.linalg.norm(t))
+            families.append(name)
+        else:
+            undeflated.append(name)
+    if not tangents:
+        return [], undeflated, Jw
+    T = np.column_stack(tangents)
+    Q, _ = np.linalg.qr(np.hstack([T, np.eye(Jw.shape[0])]))
+    basis = np.hstack([T, Q[:, len(tangents):Jw.shape[0]]])
+    B = np.linalg.solve(basis, Jw @ basis)
+    k = len(tangents)
+    return families, undeflated, B[k:, k:]
