@@ -1,0 +1,170 @@
+"""Steady motions and linearization of nonholonomic systems (issue 12): the rolling disk of the textbook and a
+rim-heavy wheel written for these tests, against the independent derivation of tests/reference_nonholonomic.py
+(Kane's method by hand, no mechsys import); CLI behaviour and input errors."""
+from __future__ import annotations
+
+import functools
+import json
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from mechsys.analysis.equilibria import SteadyOptions, find_equilibria, make_problem
+from mechsys.analysis.nonholonomic import NonholonomicProblem, linearize_steady
+from mechsys.cli import app
+
+sys.path.insert(0, str(Path(__file__).parent))
+import reference_nonholonomic as ref  # noqa: E402
+from helpers import DATA_DIR, SYSTEMS_DIR, load_data, load_system  # noqa: E402
+
+runner = CliRunner()
+DISK = SYSTEMS_DIR / "rolling_disk.yaml"
+WHEEL = DATA_DIR / "nonholonomic" / "wheel.yaml"
+G = 9.81
+
+
+@functools.lru_cache(maxsize=None)
+def cli_json(*args: str) -> dict:
+    result = runner.invoke(app, [str(a) for a in args] + ["-f", "json"])
+    assert result.exit_code == 0, result.output
+    return json.loads(result.stdout)
+
+
+def eig(e: dict) -> np.ndarray:
+    return np.sort_complex(np.array([complex(a, b) for a, b in e["eigenvalues"]]))
+
+
+def upright(eqs: dict) -> dict:
+    (e,) = [e for e in eqs["equilibria"] if abs(e["coordinates"]["lean"]) < 1e-9]
+    return e
+
+
+# --------------------------------------------------------------------------------------------- upright rolling
+@pytest.mark.parametrize("v", [0.5, 0.98, 1.0, 2.0, 4.0])
+def test_thin_disk_upright_lean_roots_equal_the_reference(v):
+    """Thin disk (m = 2, r = 0.3): the two lean roots of upright rolling at speed v equal
+    s^2 = [m g r - Ia (Ia + m r^2) v^2 / (Id r^2)] / (Id + m r^2) with Ia = m r^2/2, Id = m r^2/4; the zeros of
+    x, y, yaw, spin and of the two families (der(yaw), der(spin)) are reported apart."""
+    m, r = 2.0, 0.3
+    out = cli_json("equilibria", DISK, "--set", "lean=0", "--set", "der(yaw)=0", "--set", f"der(spin)={v / r!r}",
+                   "--search", "lean=-1:1")
+    e = upright(out)
+    want = ref.wheel_upright_eigenvalues(m, r, m * r * r / 2, m * r * r / 4, G, v)
+    assert np.allclose(eig(e), want, rtol=1e-10, atol=1e-12)
+    assert e["stability"] == ("unstable" if v < ref.thin_disk_critical_speed(r, G) else "stable")
+    assert "x, y, yaw, spin" in e["structural_zeros"] and "der(yaw), der(spin)" in e["structural_zeros"]
+    assert out["formulation"].startswith("independent speeds der(yaw), der(lean), der(spin)")
+
+
+def test_thin_disk_critical_speed_from_the_sweep():
+    """v_c = sqrt(g r / 3) for a thin disk: the sweep of the spin rate finds the zero eigenvalue there."""
+    r = 0.3
+    out = cli_json("equilibria", DISK, "--set", "lean=0", "--set", "der(yaw)=0", "--search", "lean=-0.5:0.5",
+                   "--sweep", "der(spin)=2:5:31")
+    (bif,) = [b for b in out["bifurcations"] if b["kind"] == "zero_eigenvalue"]
+    assert bif["value"] * r == pytest.approx(ref.thin_disk_critical_speed(r, G), rel=1e-8)
+
+
+def test_rim_heavy_wheel_critical_speed_and_roots():
+    """General axisymmetric wheel (Ia = 0.8 m r^2, Id = 0.45 m r^2): v_c = r sqrt(m g r Id / (Ia (Ia + m r^2)));
+    roots at v = 3 and the stability change across v_c, through the parameter v of the file (its rates follow)."""
+    m, r = 1.5, 0.35
+    Ia, Id = 0.8 * m * r * r, 0.45 * m * r * r
+    vc = ref.wheel_critical_speed(m, r, Ia, Id, G)
+    e = upright(cli_json("equilibria", WHEEL, "--search", "lean=-1:1"))
+    assert np.allclose(eig(e), ref.wheel_upright_eigenvalues(m, r, Ia, Id, G, 3.0), rtol=1e-10)
+    out = cli_json("equilibria", WHEEL, "--search", "lean=-0.5:0.5", "--sweep", "v=0.2:3:29")
+    (bif,) = [b for b in out["bifurcations"] if b["kind"] == "zero_eigenvalue"]
+    assert bif["value"] == pytest.approx(vc, rel=1e-8)
+
+
+# --------------------------------------------------------------------------------------------- steady turning
+@pytest.mark.parametrize("lean, roots", [(0.3, 2), (-0.3, 2), (-0.7, 0)])
+def test_steady_turning_at_a_given_lean_gives_both_yaw_rates(lean, roots):
+    """--given lean --solve der(yaw): both roots of (Ia + m r^2 - Id) sin cos psi'^2 + (Ia + m r^2) cos phi' psi'
+    + m g r sin = 0 (the thin disk at spin rate 1/r); none where its discriminant is negative (lean -0.7)."""
+    m, r = 2.0, 0.3
+    out = cli_json("equilibria", DISK, "--set", f"lean={lean}", "--given", "lean", "--solve", "der(yaw)")
+    got = sorted(e["rates"]["yaw"] for e in out["equilibria"])
+    want = ref.steady_turning_yaw_rates(m, r, m * r * r / 2, m * r * r / 4, G, lean, 1 / r)
+    assert len(want) == roots and len(got) == roots and np.allclose(got, want, rtol=1e-10)
+    if not roots:
+        assert out["message"].startswith("no equilibrium found")
+    for e in out["equilibria"]:
+        assert e["coordinates"]["lean"] == lean
+        assert "lean" in e["structural_zeros"]  # the family along the given lean is deflated too
+
+
+def test_steady_turning_lean_from_the_file_rates():
+    """Default: the rates of the ignorable coordinates are the file's (yaw 0.5 rad/s, spin 1/r); the leans that
+    make them a steady turn satisfy the steady-turning condition."""
+    m, r = 2.0, 0.3
+    out = cli_json("equilibria", DISK)
+    assert out["equilibria"]
+    for e in out["equilibria"]:
+        res = ref.steady_turning_residual(m, r, m * r * r / 2, m * r * r / 4, G, e["coordinates"]["lean"], 1 / r, 0.5)
+        assert abs(res) < 1e-10
+
+
+def test_a_steady_turn_simulated_keeps_its_lean():
+    """The steady turn found by equilibria, integrated by simulate (another code path), keeps its lean."""
+    out = cli_json("equilibria", DISK, "--set", "lean=0.3", "--given", "lean", "--solve", "der(yaw)")
+    e = out["equilibria"][0]
+    sets = [f"lean={e['coordinates']['lean']!r}"] + [f"der({c})={v!r}" for c, v in e["rates"].items()]
+    args = ["simulate", DISK, "--t-end", "2", "--dt", "0.5"] + [x for s in sets for x in ("--set", s)]
+    summary = {row["quantity"]: row["value"] for row in cli_json(*args)["simulation summary"]}
+    assert abs(summary["lean(t_end)"] - 0.3) < 1e-8 and abs(summary["der(lean)(t_end)"]) < 1e-8
+
+
+# --------------------------------------------------------------------------------------------- formulations
+def test_lagrange_and_kane_linearizations_agree():
+    model = load_system("rolling_disk", {"lean": 0.2})
+    eqs = {}
+    for method in ("kane", "lagrange"):
+        problem = NonholonomicProblem(model, method=method)
+        res = find_equilibria(model)
+        e = min(res.equilibria, key=lambda e: abs(e.coordinates["lean"]))
+        lin = linearize_steady(problem, e)
+        eqs[method] = lin
+    a, b = eqs["kane"], eqs["lagrange"]
+    assert np.allclose(a.jacobian, b.jacobian, rtol=1e-10, atol=1e-12)
+    assert np.allclose(a.M, b.M, rtol=1e-12) and np.allclose(a.K, b.K, rtol=1e-10, atol=1e-12)
+
+
+def test_steady_problem_split_is_reported_and_structural():
+    model = load_data("nonholonomic/wheel")
+    problem = make_problem(model)
+    assert problem.split.dependent == ["x", "y"]
+    assert problem.split.ignorable == ["x", "y", "yaw", "spin"]
+    assert problem.fixed_rates == {"yaw": 0.0, "spin": pytest.approx(3.0 / 0.35)}
+
+
+# --------------------------------------------------------------------------------------------- CLI and errors
+def test_modes_of_a_rolling_wheel():
+    out = cli_json("modes", WHEEL, "--at", "lean=0")
+    m, r = 1.5, 0.35
+    want = ref.wheel_upright_eigenvalues(m, r, 0.8 * m * r * r, 0.45 * m * r * r, G, 3.0)
+    (mode,) = out["modes"]
+    assert mode["frequency_rad_s"] == pytest.approx(abs(want[0]), rel=1e-10)
+    assert mode["shape"] == {"lean": 1.0}
+
+
+@pytest.mark.parametrize("args, message, code", [
+    (["equilibria", DISK, "--given", "tilt"], "--given tilt: unknown coordinate", 2),
+    (["equilibria", DISK, "--given", "yaw"], "--given yaw: yaw is ignorable", 2),
+    (["equilibria", DISK, "--solve", "der(lean)"], "--solve der(lean): not the independent rate", 2),
+    (["equilibria", SYSTEMS_DIR / "double_pendulum.yaml", "--given", "theta1"], "this model is holonomic", 2),
+    (["equilibria", DISK, "--verify"], "--verify is not available for nonholonomic", 2),
+    (["equilibria", DISK, "--independent", "lean", "--linearize"], "the equations of lean involve der(yaw)", 1),
+    (["modes", DISK, "--frf", "1:2:3"], "a nonholonomic steady motion has none", 2),
+])
+def test_input_errors_are_one_line(args, message, code):
+    result = runner.invoke(app, [str(a) for a in args])
+    assert result.exit_code == code, result.output
+    lines = [line for line in result.output.splitlines() if line.strip()]
+    assert len(lines) == 1 and message in lines[0], result.output
+    assert "Traceback" not in result.output
