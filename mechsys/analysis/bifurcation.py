@@ -106,7 +106,8 @@ class SweptParameter:
 
     def Fp(self, z: np.ndarray, p: float) -> np.ndarray:
         P = self.at(p)
-        out = self.problem.Fp(z, P) @ self.dpvec(p, P)
+        along = getattr(self.problem, "Fp_along", None)  # a problem whose Fp is numeric: one direction only
+        out = along(z, P, self.dpvec(p, P)) if along is not None else self.problem.Fp(z, P) @ self.dpvec(p, P)
         dr = self.drates(p, P)
         if np.any(dr):
             out = out + self.problem.Fr(z, P) @ dr
@@ -185,17 +186,22 @@ def sweep(model: MechanicalModel, name: str, start: float, stop: float, points: 
     lo, hi = min(start, stop), max(start, stop)
 
     rows: list[int] | slice = slice(None)  # the equations continued on (a square system), chosen below
+    # continuation measures arclength in the unknowns it is given: auxiliary unknowns of large size (a bicycle's
+    # multipliers, hundreds of newtons) would shrink its steps in the parameter, so a problem may scale them down
+    # (the unknowns the branches report are never scaled)
+    D = np.ones(len(problem.unknowns))
 
     def F(z, p):
-        return problem.F(z, par.at(p))[rows]
+        return problem.F(D * z, par.at(p))[rows]
 
     def Fx(z, p):
-        return problem.J(z, par.at(p))[rows]
+        return problem.J(D * z, par.at(p))[rows] * D
 
     def Fp(z, p):
-        return par.Fp(z, p)[rows]
+        return par.Fp(D * z, p)[rows]
 
     def eig(z, p):
+        z = D * z
         par.at(p)
         A, B, _ = reduced_pencil(problem, problem.equilibrium(z))
         return eigen(A, B)[0]
@@ -218,6 +224,10 @@ def sweep(model: MechanicalModel, name: str, start: float, stop: float, points: 
         except (ValueError, ArithmeticError):
             return False
 
+    scale = getattr(problem, "auxiliary_scale", None)
+    if scale is not None and starts:
+        D = scale([z for z, _ in starts])
+        starts = [(z / D, p) for z, p in starts]
     keep = [smooth(z, p) for z, p in starts]  # not smooth: e.g. d sqrt(mu)/d mu at mu = 0
     undefined += [f"{name} = {p:g} (the derivatives of the equations are not finite there)"
                   for p in sorted({p for (_, p), ok in zip(starts, keep) if not ok})]
@@ -229,6 +239,11 @@ def sweep(model: MechanicalModel, name: str, start: float, stop: float, points: 
                                    max_steps=max(2000, 20 * points)) if starts else []
     except (ValueError, ArithmeticError) as exc:
         raise AnalysisError(f"--sweep {name}: {exc}") from None
+    for branch in branches:  # back to the problem's unknowns
+        for pt in branch.points:
+            pt.x = D * pt.x
+        for bif in branch.bifurcations:
+            bif.x = D * bif.x
     _check_all_equations(problem, branches, par.at, name)
     artefacts = {id(b) for b in _point_verdicts(problem, branches, par.at)}
     twins = {id(b) for k, b in enumerate(branches) if id(b) not in artefacts

@@ -394,11 +394,14 @@ class SearchReport:
     spread_rates: list[str]  # steady rates drawn log-uniformly (RATE_DECADES)
     outside: list[str] = field(default_factory=list)  # "name = value" of roots beyond the default start boxes
     deflation: bool = True
+    eliminated: list[str] = field(default_factory=list)  # solved from the holonomic constraints, not drawn
 
     def text(self) -> str:
         parts = []
         for name, (lo, hi) in self.region.items():
-            if name in self.solved_rates:
+            if name in self.eliminated:
+                parts.append(f"{name} solved from the holonomic constraints at each start")
+            elif name in self.solved_rates:
                 parts.append(f"{name} solved from its linear equation at each start")
             elif name in self.spread_rates:
                 parts.append(f"|{name}| log-spread over [{lo:.4g}, {hi:.4g}], both signs")
@@ -412,14 +415,16 @@ class SearchReport:
     def to_dict(self) -> dict:
         return {"starts": self.starts, "region": {k: list(v) for k, v in self.region.items()},
                 "restricted": self.restricted, "solved_rates": self.solved_rates, "spread_rates": self.spread_rates,
-                "outside": self.outside, "deflation": self.deflation}
+                "outside": self.outside, "deflation": self.deflation,
+                **({"eliminated": self.eliminated} if self.eliminated else {})}
 
 
 def search_plan(problem: EquilibriumProblem, search: dict | None, starts: int | None = None) -> SearchReport:
     boxes = _boxes(problem, search)
     search = search or {}
     names = list(problem.free) + [f"der({c})" for c in problem.rate_unknowns]
-    count = starts if starts is not None else 24 + 24 * len(boxes)
+    eliminated = [c for c in getattr(problem, "eliminated", ()) if c in names and c not in search]
+    count = starts if starts is not None else 24 + 24 * (len(boxes) - len(eliminated))
     given = [n for n, c in zip(names, list(problem.free) + list(problem.rate_unknowns)) if n in search or c in search]
     rates = [f"der({c})" for c in problem.rate_unknowns]
     solved = [r for r in rates if problem.linear_rates and r not in given]
@@ -429,7 +434,7 @@ def search_plan(problem: EquilibriumProblem, search: dict | None, starts: int | 
         if r in spread:
             scale = max(1.0, abs(problem.model.doc.initial_rate.get(c, 0.0)))
             region[r] = (scale * 10 ** RATE_DECADES[0], scale * 10 ** RATE_DECADES[1])
-    return SearchReport(count + 2, region, given, solved, spread)
+    return SearchReport(count + 2, region, given, solved, spread, eliminated=eliminated)
 
 
 def search_report(problem: EquilibriumProblem, search: dict | None, starts: int | None = None) -> str:
@@ -440,7 +445,9 @@ def search_report(problem: EquilibriumProblem, search: dict | None, starts: int 
 def _draw(plan: SearchReport, rng: np.random.Generator) -> np.ndarray:
     out = []
     for name, (lo, hi) in plan.region.items():
-        if name in plan.spread_rates:
+        if name in plan.eliminated:
+            out.append(0.0)  # replaced by the projection onto the holonomic constraints
+        elif name in plan.spread_rates:
             out.append(rng.choice((-1.0, 1.0)) * 10 ** rng.uniform(math.log10(lo), math.log10(hi)))
         else:
             out.append(rng.uniform(lo, hi))

@@ -31,7 +31,7 @@ import sympy as sp
 from mechsys.analysis.equilibria import Equilibrium, EquilibriumProblem, parameter_values, wrap
 from mechsys.errors import AnalysisError, InputError
 from mechsys.mechanics.model import MechanicalModel
-from mechsys.numeric.lambdify import compile_exprs
+from mechsys.numeric.lambdify import compile_exprs, function_from_source, generate_source, value_and_jacobian_sources
 
 #: relative size below which a column, a singular value or a shift difference counts as zero
 ZERO = 1e-9
@@ -39,37 +39,63 @@ ZERO = 1e-9
 
 # ----------------------------------------------------------------------------------------- compiled pieces
 class ConstrainedPieces:
-    """E = [R; S; g; Phi] and dE/dq, dE/du, M, A compiled as one function of (q, u, a, lambda, p) at t = 0."""
+    """E = [R; S; g; Phi] and dE/dq, dE/du, M, A compiled as one function of (q, u, a, lambda, p) at t = 0.
+
+    The generated source is cached on disk (numeric/cache.py: keyed by the model's structure, its decisions and
+    the code version; signed; checked to be arithmetic before it runs), so a second command on the same model
+    does no symbolic work: neither the equations of motion nor their derivatives."""
 
     def __init__(self, model: MechanicalModel, method: str) -> None:
-        eq = model.equations(method)
+        from mechsys.numeric import cache
+
         rows = model.kin.constraints
         self.names = list(model.coordinates)
         self.n, self.m = len(model.q), len(rows)
         self.mh = sum(1 for r in rows if r.kind == "holonomic")
+        self.size = self.n + 2 * self.m + self.mh
         self.lam = list(sp.symbols(f"lambda1:{self.m + 1}", real=True)) if self.m else []
+        n = self.n
+        self.layout = {"E": (0, (self.size, 1)), "M": (self.size, (n, n)), "A": (self.size + n * n, (self.m, n))}
+        self._outputs = self.size + n * n + self.m * n
+        key = cache.model_key(model, f"constrained-pieces-{method}")
+        entry = cache.load(key)
+        if not (isinstance(entry, dict) and entry.get("size") == self.size and isinstance(entry.get("source"), str)
+                and isinstance(entry.get("values"), str) and isinstance(entry.get("autonomous"), bool)):
+            values, source = self._sources(model, method)
+            entry = {"size": self.size, "values": values, "source": source, "autonomous": model.is_autonomous(method)}
+            cache.store(key, entry)
+        self.autonomous = entry["autonomous"]
+        self._fn = function_from_source(entry["source"])
+        self._values = function_from_source(entry["values"])
+
+    def _sources(self, model: MechanicalModel, method: str) -> tuple[str, str]:
+        """E alone (what a line search evaluates); and E, M, A followed by dE/d(q, u) row by row (forward
+        differentiation of the CSE graph)."""
+        eq = model.equations(method)
+        rows = model.kin.constraints
         t0 = {model.t: 0}
         a = sp.Matrix(model.a)
         R = eq.M * a - eq.f - (eq.A.T * sp.Matrix(self.lam) if self.m else sp.zeros(self.n, 1))
         S = eq.A * a - eq.b
-        g = sp.Matrix([r.velocity for r in rows])
-        Phi = sp.Matrix([r.position for r in rows if r.kind == "holonomic"])
-        E = sp.Matrix(list(R) + list(S) + list(g) + list(Phi)).xreplace(t0)
-        self.size = E.shape[0]
-        blocks = [("E", E), ("Eq", E.jacobian(model.q)), ("Eu", E.jacobian(model.u)),
-                  ("M", eq.M.xreplace(t0)), ("A", eq.A.xreplace(t0))]
-        exprs: list = []
-        self.layout = {}
-        for key, mat in blocks:
-            self.layout[key] = (len(exprs), mat.shape)
-            exprs += list(mat)
-        self.args = [*model.q, *model.u, *model.a, *self.lam, *model.parameter_symbols]
-        self._fn = compile_exprs(exprs, self.args)
+        g = [r.velocity for r in rows]
+        Phi = [r.position for r in rows if r.kind == "holonomic"]
+        outputs = [sp.sympify(e).xreplace(t0) for e in list(R) + list(S) + g + Phi + list(eq.M) + list(eq.A)]
+        args = [*model.q, *model.u, *model.a, *self.lam, *model.parameter_symbols]
+        _values, source = value_and_jacobian_sources(outputs, args, [*model.q, *model.u], rows=self.size)
+        return generate_source(outputs[:self.size], args), source
+
+    def residual(self, q, u, a, lam, p) -> np.ndarray:
+        """E alone (no derivatives): what a line search evaluates."""
+        with np.errstate(all="ignore"):
+            return np.asarray(self._values(*q, *u, *a, *lam, *p), dtype=float)
 
     def evaluate(self, q, u, a, lam, p) -> dict[str, np.ndarray]:
-        out = np.asarray(self._fn(*q, *u, *a, *lam, *p), dtype=float)
+        with np.errstate(all="ignore"):  # overflow far from the roots gives inf/nan, which the callers reject
+            out = np.asarray(self._fn(*q, *u, *a, *lam, *p), dtype=float)
         v = {key: out[s:s + shape[0] * shape[1]].reshape(shape) for key, (s, shape) in self.layout.items()}
         v["E"] = v["E"].ravel()
+        jac = out[self._outputs:self._outputs + self.size * 2 * self.n].reshape(self.size, 2 * self.n)
+        v["Eq"], v["Eu"] = jac[:, :self.n], jac[:, self.n:]
         return v
 
     def accelerations(self, q, u, p) -> tuple[np.ndarray, np.ndarray]:
@@ -140,9 +166,7 @@ def choose_split(model: MechanicalModel, pieces: ConstrainedPieces, q0: np.ndarr
     M, A = v["M"], v["A"]
     Mscale = max(1e-300, float(np.max(np.abs(M))))
     massless = [i for i in range(n) if np.max(np.abs(M[i])) <= 1e-12 * Mscale]
-    eq = model.equations("kane") if "kane" in model._eqs else model.equations("lagrange")
-    used = set().union(eq.M.free_symbols, eq.f.free_symbols, model.holonomic_constraints.free_symbols)
-    absent = [i for i in range(n) if model.q[i] not in used and i not in massless]
+    absent = [i for i in _absent(pieces, p) if i not in massless]
     translations = [i for i in absent if not model.angles.get(names[i], False)]
     angles = [i for i in reversed(absent) if model.angles.get(names[i], False)]
     order = massless + translations + angles + [i for i in range(n) if i not in massless + absent]
@@ -165,6 +189,20 @@ def choose_split(model: MechanicalModel, pieces: ConstrainedPieces, q0: np.ndarr
     split.ignorable = [c for c in names if c in ignorable]
     split.shape = [c for c in names if c not in ignorable]
     return split
+
+
+def _absent(pieces: ConstrainedPieces, p: np.ndarray) -> list[int]:
+    """Coordinates on which neither M, f nor Phi depend (d(M a - f)/dq and dPhi/dq vanish at random states with
+    lambda = 0): a wheel's angle, a position on the ground."""
+    n, m = pieces.n, pieces.m
+    rng = np.random.default_rng(23)
+    total = np.zeros(n)
+    rows = list(range(n)) + list(range(n + 2 * m, pieces.size))
+    for _ in range(3):
+        v = pieces.evaluate(rng.uniform(-1, 1, n), rng.uniform(-1, 1, n), rng.uniform(-1, 1, n), np.zeros(m), p)
+        block = np.abs(v["Eq"][rows])
+        total = np.maximum(total, block.max(axis=0) / max(1e-300, float(block.max())) if block.size else 0.0)
+    return [i for i in range(n) if total[i] <= 1e-12]
 
 
 def _ignorable(model: MechanicalModel, pieces: ConstrainedPieces, split: Split, p: np.ndarray) -> set[str]:
@@ -258,11 +296,11 @@ class NonholonomicProblem(EquilibriumProblem):
     def __init__(self, model: MechanicalModel, given: list[str] | None = None, solve: list[str] | None = None,
                  independent: list[str] | None = None, method: str = "kane") -> None:
         self.model = model
-        if not model.is_autonomous(method):
-            raise AnalysisError("the equations depend explicitly on time (non-autonomous): there are no "
-                                "steady motions in the ordinary sense")
         self.method = method
         self.pieces = constrained_pieces(model, method)
+        if not self.pieces.autonomous:
+            raise AnalysisError("the equations depend explicitly on time (non-autonomous): there are no "
+                                "steady motions in the ordinary sense")
         names = model.coordinates
         p = parameter_values(model)
         q0 = np.array([model.doc.initial.get(c, 0.0) for c in names], dtype=float)
@@ -290,6 +328,7 @@ class NonholonomicProblem(EquilibriumProblem):
                                  f"from {', '.join(f'der({g})' for g in group) or 'none'})")
             freed.append(c)
         self.free = [c for c in split.shape if c not in self.given]
+        self.eliminated = [c for c in split.eliminated if c in self.free]
         self.nq = len(self.free)
         self.cyclic = list(split.ignorable)
         self.rate_unknowns = [c for c in group if c in freed]
@@ -358,7 +397,7 @@ class NonholonomicProblem(EquilibriumProblem):
         return self.pieces.evaluate(*self.full_state(z), p)
 
     def F(self, z: np.ndarray, p: np.ndarray) -> np.ndarray:
-        return self._at(z, p)["E"]
+        return self.pieces.residual(*self.full_state(z), p)
 
     def J(self, z: np.ndarray, p: np.ndarray) -> np.ndarray:
         return self._columns(self._at(z, p))
@@ -369,16 +408,27 @@ class NonholonomicProblem(EquilibriumProblem):
         return np.column_stack(cols) if cols else np.zeros((self.pieces.size, 0))
 
     def Fp(self, z: np.ndarray, p: np.ndarray) -> np.ndarray:
-        """dF/dp by central differences (the parameters enter M, f and the constraints everywhere; the exact
-        Jacobian would double the symbolic work for a predictor step)."""
-        out = np.zeros((self.pieces.size, len(p)))
-        for k in range(len(p)):
-            h = 1e-6 * max(1.0, abs(p[k]))
-            hi, lo = p.copy(), p.copy()
-            hi[k] += h
-            lo[k] -= h
-            out[:, k] = (self.F(z, hi) - self.F(z, lo)) / (2 * h)
-        return out
+        """dF/dp, one column per parameter (see Fp_along)."""
+        return np.column_stack([self.Fp_along(z, p, np.eye(len(p))[k]) for k in range(len(p))]) if len(p) else \
+            np.zeros((self.pieces.size, 0))
+
+    def Fp_along(self, z: np.ndarray, p: np.ndarray, direction: np.ndarray) -> np.ndarray:
+        """dF/dp . direction by a central difference (the parameters enter M, f and the constraints everywhere;
+        exact derivatives would double the symbolic work for what only a continuation predictor uses)."""
+        size = float(np.linalg.norm(direction))
+        if size == 0:
+            return np.zeros(self.pieces.size)
+        h = 1e-6 * max(1.0, float(np.linalg.norm(p))) / size
+        return (self.F(z, p + h * direction) - self.F(z, p - h * direction)) / (2 * h)
+
+    def auxiliary_scale(self, roots: list[np.ndarray]) -> np.ndarray:
+        """Scale of the unknowns for continuation: 1 for the reported ones (shape coordinates, free rates), the
+        largest size seen at the roots for the dependent rates, accelerations and multipliers."""
+        D = np.ones(len(self.unknowns))
+        k = self.nq + len(self.rate_unknowns)
+        if roots and len(D) > k:
+            D[k:] = np.maximum(1.0, np.max(np.abs(np.array(roots))[:, k:], axis=0))
+        return D
 
     def extra(self) -> list[float]:
         return []
@@ -391,15 +441,18 @@ class NonholonomicProblem(EquilibriumProblem):
         z = np.concatenate([start[:k], np.zeros(2 * len(self.dependent_rates) + self.m)])
         n, m = self.n, self.m
         if self.mh:
+            cols = [self.free.index(c) for c in self.eliminated] or list(range(self.nq))
+            for c in self.eliminated:  # not drawn: from the file's configuration
+                z[self.free.index(c)] = self.model.doc.initial.get(c, 0.0)
             for _ in range(30):
                 v = self._at(z, p)
                 phi = v["E"][n + 2 * m:]
-                Jq = self._columns(v)[n + 2 * m:, :self.nq]
+                Jq = self._columns(v)[n + 2 * m:, cols]
                 if not (np.all(np.isfinite(phi)) and np.all(np.isfinite(Jq))):
                     break
                 if np.max(np.abs(phi)) <= 1e-13:
                     break
-                z[:self.nq] += np.linalg.lstsq(Jq, -phi, rcond=None)[0]
+                z[cols] += np.linalg.lstsq(Jq, -phi, rcond=None)[0]
         nd = len(self.dependent_rates)
         if nd:
             v = self._at(z, p)

@@ -20,10 +20,29 @@ def _info(model: MechanicalModel, options: dict) -> Outputs:
             "autonomous": info.autonomous}
 
 
+def search_boxes(value: Any) -> dict[str, tuple[float, float]] | None:
+    """The ``search`` option: a mapping, or text "NAME=LO:HI, NAME=LO:HI" (what an expectation can hold)."""
+    if value is None or isinstance(value, dict):
+        return value
+    from mechsys.errors import InputError
+
+    boxes = {}
+    for item in str(value).replace(",", " ").split():
+        name, _, rng = item.partition("=")
+        try:
+            lo, hi = (float(x) for x in rng.split(":"))
+        except ValueError:
+            raise InputError(f"option search: {item!r} is not NAME=LO:HI") from None
+        if not lo < hi:
+            raise InputError(f"option search: {item!r}: LO must be less than HI")
+        boxes[name.strip()] = (lo, hi)
+    return boxes
+
+
 def _equilibria(model: MechanicalModel, options: dict) -> Outputs:
     from mechsys.analysis.equilibria import find_equilibria
 
-    res = find_equilibria(model, options.get("search"))
+    res = find_equilibria(model, search_boxes(options.get("search")))
     out: Outputs = {"count": len(res.equilibria),
                     "stable_count": sum(e.stability in ("stable", "asymptotically stable") for e in res.equilibria)}
     for k, e in enumerate(res.equilibria, start=1):

@@ -175,10 +175,18 @@ def modes_tables(modes) -> list[Table]:
 def steady_linearization_tables(lin, label: str, independent: list[str] | None, hurwitz: bool) -> list[Table]:
     """Nonholonomic steady motion (analysis/nonholonomic.py): Kane's M, C, K over the independent speeds, the
     kinematic rows, the first-order A and B; with --independent, the second-order form over those coordinates."""
+    from mechsys.errors import AnalysisError
+
     tables = []
     speeds = [f"der({c})" for c in lin.speeds]
+    coupled = ""
     if independent:
-        M, C, K = lin.second_order(independent)
+        try:
+            M, C, K = lin.second_order(independent)
+        except AnalysisError as exc:  # e.g. a steady turn couples lean and steer to the speed: Kane's form instead
+            coupled = str(exc)
+            independent = None
+    if independent:
         for key, mat in (("M", M), ("C", C), ("K", K)):
             tables.append(matrix_table(f"{label}: {key} over {', '.join(independent)} "
                                        f"(M q'' + C q' + K q = generalized forces)", independent, mat))
@@ -191,6 +199,10 @@ def steady_linearization_tables(lin, label: str, independent: list[str] | None, 
                                    states))
     else:
         tables.append(matrix_table(f"{label}: M (Kane's generalized mass over the independent speeds)", speeds, lin.M))
+        if coupled:
+            tables[-1].notes.append(coupled.split(": there is no")[0] + ": no second-order form over the "
+                                    "--independent coordinates alone here; Kane's form over all independent "
+                                    "speeds follows")
         tables.append(matrix_table(f"{label}: C (rows: independent speeds)", speeds, lin.C))
         if lin.coordinates:
             tables.append(matrix_table(f"{label}: K (rows: independent speeds)", lin.coordinates, lin.K, speeds))

@@ -1,0 +1,137 @@
+"""The Whipple bicycle benchmark (Meijaard, Papadopoulos, Ruina and Schwab 2007) through systems/bicycle.yaml:
+eigenvalues against the paper's Table 2 and the published M0, C1, K0, K2 (tests/reference_nonholonomic.py, no
+mechsys import), weave and capsize speeds from the sweep, Lagrange = Kane, and simulations of the nonlinear
+model that agree with the verdicts."""
+from __future__ import annotations
+
+import functools
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+import mechsys
+from mechsys.analysis.equilibria import _polish, make_problem, parameter_values
+from mechsys.analysis.nonholonomic import NonholonomicProblem, linearize_steady
+from mechsys.cli import app
+
+sys.path.insert(0, str(Path(__file__).parent))
+import reference_nonholonomic as ref  # noqa: E402
+from helpers import SYSTEMS_DIR  # noqa: E402
+
+BIKE = SYSTEMS_DIR / "bicycle.yaml"
+runner = CliRunner()
+
+
+@functools.lru_cache(maxsize=None)
+def upright(v: float, method: str = "kane"):
+    """The linearization about upright straight running at speed v (the file's rates follow v)."""
+    model = mechsys.load(BIKE, {"v": v})
+    problem = NonholonomicProblem(model, method=method)
+    p = parameter_values(model)
+    z = _polish(problem, problem.start(np.zeros(problem.nq + len(problem.rate_unknowns)), p), p)
+    assert z is not None
+    e = problem.equilibrium(z)
+    assert max(abs(x) for x in e.coordinates.values()) < 1e-12
+    return linearize_steady(problem, e, p)
+
+
+def same_roots(got: np.ndarray, want: np.ndarray, rel: float) -> bool:
+    diff, _ = ref.max_eigenvalue_difference(got, want)
+    return len(got) == len(want) and diff <= rel * max(1.0, float(np.max(np.abs(want))))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("v", range(11))
+def test_eigenvalues_equal_table_2(v):
+    """The 4 lean/steer eigenvalues at v = 0, 1, ..., 10 m/s: Table 2 of the paper to 1e-10 relative; the
+    structural zeros of x, y, yaw, both wheel angles and the speed family are apart."""
+    lin = upright(float(v))
+    assert same_roots(lin.eigenvalues, ref.TABLE2_EIGENVALUES[v], 1e-10)
+    assert same_roots(lin.eigenvalues, ref.benchmark_eigenvalues(float(v)), 1e-10)
+    assert lin.ignorable == ["x", "y", "yaw", "theta_R", "theta_F"] and lin.families == ["der(theta_R)"]
+
+
+def test_reduced_matrices_equal_the_published_ones():
+    """--independent lean,steer: M = M0, C = v C1, K = g K0 + v^2 K2 (read at v = 0 and v = 2) to 1e-10."""
+    M, C0, K_0 = upright(0.0).second_order(["lean", "steer"])
+    M2, C2, K_2 = upright(2.0).second_order(["lean", "steer"])
+    assert np.allclose(M, ref.BENCH_M0, rtol=1e-10, atol=1e-12) and np.allclose(M2, ref.BENCH_M0, rtol=1e-10)
+    assert np.allclose(C0, 0.0, atol=1e-10)
+    assert np.allclose(C2 / 2.0, ref.BENCH_C1, rtol=1e-10, atol=1e-10)
+    assert np.allclose(K_0 / ref.G_BENCH, ref.BENCH_K0, rtol=1e-10, atol=1e-10)
+    assert np.allclose((K_2 - K_0) / 4.0, ref.BENCH_K2, rtol=1e-10, atol=1e-10)
+
+
+def test_linearize_cli_prints_the_benchmark_matrices():
+    result = runner.invoke(app, ["equilibria", str(BIKE), "--search", "lean=-0.3:0.3", "--search",
+                                 "steer=-0.3:0.3", "--independent", "lean,steer", "--linearize", "-f", "markdown"])
+    assert result.exit_code == 0, result.output
+    text = result.stdout
+    assert "M over lean, steer" in text and "80.81722" in text and "2.319413" in text
+    assert "no second-order form" in text  # the two steady turns at 5 m/s couple lean and steer to the speed
+    assert "asymptotically stable" in text  # v = 5 m/s (the file's speed) lies in the stable range
+
+
+@pytest.mark.slow
+def test_lagrange_and_kane_linearizations_agree():
+    kane, lagrange = upright(3.0, "kane"), upright(3.0, "lagrange")
+    assert np.allclose(kane.jacobian, lagrange.jacobian, rtol=1e-9, atol=1e-9)
+    assert same_roots(kane.eigenvalues, lagrange.eigenvalues, 1e-10)
+
+
+@pytest.mark.slow
+def test_sweep_finds_weave_and_capsize_speeds():
+    result = runner.invoke(app, ["equilibria", str(BIKE), "--search", "lean=-0.3:0.3", "--search", "steer=-0.3:0.3",
+                                 "--sweep", "v=0:10:101", "-f", "json"])
+    assert result.exit_code == 0, result.output
+    bifs = json.loads(result.stdout)["bifurcations"]
+    upright = [b for b in bifs if max(abs(x) for x in b["coordinates"].values()) < 1e-9]
+    hopf = [b["value"] for b in upright if b["kind"] == "hopf"]
+    # capsize: a real root crosses zero, and the branches of steady turns meet straight running there
+    real = [b["value"] for b in upright if b["kind"] in ("branch_point", "zero_eigenvalue")]
+    assert len(hopf) == 1 and hopf[0] == pytest.approx(ref.WEAVE_SPEED, abs=1e-8)
+    assert len(real) == 1 and real[0] == pytest.approx(ref.CAPSIZE_SPEED, abs=1e-8)
+
+
+# ------------------------------------------------------------------------------------------- the nonlinear model
+def simulate(*sets: str, t_end: float = 4.0) -> dict:
+    args = ["simulate", str(BIKE), "--t-end", str(t_end), "--dt", "0.5", "-f", "json"]
+    for s in sets:
+        args += ["--set", s]
+    result = runner.invoke(app, args)
+    assert result.exit_code == 0, result.output
+    return {row["quantity"]: row["value"] for row in json.loads(result.stdout)["simulation summary"]}
+
+
+@pytest.mark.slow
+def test_upright_running_keeps_energy_and_constraints():
+    s = simulate("v=5", t_end=2.0)
+    assert abs(s["max relative energy drift"]) < 1e-10 and s["max constraint residual"] < 1e-10
+    assert abs(s["lean(t_end)"]) < 1e-12 and s["x(t_end)"] == pytest.approx(10.0, rel=1e-9)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("v, grows", [(5.0, False), (3.0, True)])
+def test_a_lean_perturbation_decays_in_the_stable_range_and_grows_below_weave(v, grows):
+    """A lean rate of 0.05 rad/s: at 5 m/s (between weave 4.29 and capsize 6.02) the bicycle rights itself, at
+    3 m/s the weave grows (Re = +1.71 at 3 m/s, Table 2)."""
+    s = simulate(f"v={v}", "der(lean)=0.05", t_end=4.0)
+    final = abs(s["lean(t_end)"]) + abs(s["der(lean)(t_end)"])
+    if grows:
+        assert final > 0.5
+    else:
+        assert final < 0.05 * 0.2
+
+
+def test_modes_at_5_m_s_are_weave_capsize_and_castor():
+    """docs/modes.md 12: one mode per eigenvalue with Im >= 0, |lambda| and -Re/|lambda| of Table 2 at 5 m/s."""
+    result = runner.invoke(app, ["modes", str(BIKE), "--at", "lean=0", "--at", "steer=0", "-f", "json"])
+    assert result.exit_code == 0, result.output
+    modes = json.loads(result.stdout)["modes"]
+    want = [v for v in ref.TABLE2_EIGENVALUES[5] if v.imag >= 0]
+    got = sorted((m["frequency_rad_s"], m["damping_ratio"]) for m in modes)
+    assert np.allclose(got, sorted((abs(v), -v.real / abs(v)) for v in want), rtol=1e-10)
