@@ -176,3 +176,28 @@ def test_input_errors_are_one_line(args, message, code):
     lines = [line for line in result.output.splitlines() if line.strip()]
     assert len(lines) == 1 and message in lines[0], result.output
     assert "Traceback" not in result.output
+
+
+def test_cached_pieces_equal_uncached_ones_and_skip_the_derivation(tmp_path, monkeypatch):
+    """The compiled steady-motion pieces come back from the on-disk cache (no symbolic work: deriving raises) and
+    give the same numbers, bit for bit, as the freshly derived ones; another structure gets another entry."""
+    import mechsys
+    from mechsys.analysis.nonholonomic import ConstrainedPieces
+
+    monkeypatch.setenv("MECHSYS_CACHE", str(tmp_path))
+    fresh = ConstrainedPieces(mechsys.load(WHEEL), "kane")
+    assert list(tmp_path.glob("*.json"))
+    model = mechsys.load(WHEEL)
+    monkeypatch.setattr(type(model), "equations", lambda *a, **k: (_ for _ in ()).throw(AssertionError("derived")))
+    cached = ConstrainedPieces(model, "kane")
+    rng = np.random.default_rng(5)
+    p = np.array(list(model.parameters.values()))
+    for _ in range(3):
+        q, u, a, lam = rng.normal(size=5), rng.normal(size=5), rng.normal(size=5), rng.normal(size=2)
+        x, y = fresh.evaluate(q, u, a, lam, p), cached.evaluate(q, u, a, lam, p)
+        assert all(np.array_equal(x[k], y[k]) for k in x)
+    monkeypatch.undo()
+    monkeypatch.setenv("MECHSYS_CACHE", str(tmp_path))
+    before = set(tmp_path.glob("*.json"))
+    ConstrainedPieces(mechsys.load(DISK), "kane")  # another model: another key
+    assert set(tmp_path.glob("*.json")) - before

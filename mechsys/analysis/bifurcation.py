@@ -276,8 +276,14 @@ def sweep(model: MechanicalModel, name: str, start: float, stop: float, points: 
     events = []
     for branch in branches:
         for bif in branch.bifurcations:
+            refined = False
+            if bif.kind in ("branch_point", "zero_eigenvalue"):
+                p_arc = bif.p
+                bif.p, bif.x = _refine_singular(problem, par, rows, bif.p, bif.x, step)
+                refined = bif.p != p_arc
             coords = {n: (wrap(v) if a else float(v)) for n, v, a in zip(names, bif.x[:nreport], angles)}
-            events.append({"kind": bif.kind, "parameter": name, "value": float(bif.p), "coordinates": coords})
+            events.append({"kind": bif.kind, "parameter": name, "value": float(bif.p), "coordinates": coords,
+                           "refined": refined})
     result.bifurcations = _merge_events(events, angles, step)
     result.bifurcations.sort(key=lambda b: (b["value"], b["kind"]))
     return result
@@ -387,11 +393,54 @@ def _merge_events(events: list[dict], angles: list[bool], step: float) -> list[d
         if "fold" in kinds and "branch_point" in kinds:
             # a pitchfork: the other branch folds back exactly here; the fold's parameter value is the
             # well-conditioned one, the branch point's coordinates are the exact ones
+            # (unless the branch point was refined in the parameter itself: then it is the exact one)
             bp = next(ev for ev in cluster if ev["kind"] == "branch_point")
-            merged.append({**bp, "value": folds[0]["value"]})
+            merged.append(bp if bp["refined"] else {**bp, "value": folds[0]["value"]})
         else:
             merged.append((folds or cluster)[0])
-    return merged
+    return [{k: v for k, v in ev.items() if k != "refined"} for ev in merged]
+
+
+def _refine_singular(problem, par: SweptParameter, rows, p0: float, x0: np.ndarray,
+                     step: float) -> tuple[float, np.ndarray]:
+    """A branch point or real root crossing located along the arc is refined in the parameter itself: the
+    steady state corrected by Newton at fixed p, and Brent's method on the sign of det(dF/dx) over
+    [p0 - step, p0 + step] (at a pitchfork the fold of the other branch, located along its arc, was 4e-3 off at
+    the bicycle's capsize speed). The original is kept when the refinement cannot bracket a sign change or the
+    corrector leaves the branch."""
+    from scipy.optimize import brentq
+
+    def corrected(p: float) -> np.ndarray:
+        z = x0.copy()
+        P = par.at(p)
+        for _ in range(20):
+            F = problem.F(z, P)[rows]
+            dz = np.linalg.lstsq(problem.J(z, P)[rows], -F, rcond=None)[0]
+            z = z + dz
+            if np.linalg.norm(dz, np.inf) <= 1e-14 * (1.0 + np.linalg.norm(z, np.inf)):
+                break
+        if np.linalg.norm(z - x0) > 1e-3 * (1.0 + np.linalg.norm(x0)):
+            raise ValueError("left the branch")
+        return z
+
+    def g(p: float) -> float:
+        J = problem.J(corrected(p), par.at(p))[rows]
+        sign, logdet = np.linalg.slogdet(J)
+        return float(sign * np.exp(logdet - scale))
+
+    try:
+        scale = np.linalg.slogdet(problem.J(x0, par.at(p0))[rows])[1]
+        scale = 0.0 if not np.isfinite(scale) else scale
+        a, b = p0 - step, p0 + step
+        ga, gb = g(a), g(b)
+        if ga * gb >= 0.0:
+            return p0, x0
+        p = float(brentq(g, a, b, xtol=1e-14, rtol=1e-15, maxiter=200))
+        return p, corrected(p)
+    except (ValueError, ArithmeticError, np.linalg.LinAlgError, RuntimeError):
+        return p0, x0
+    finally:
+        par.at(p0)
 
 
 def plot_sweep(result: SweepResult, path: str, coordinate: str | None = None) -> None:
@@ -446,11 +495,18 @@ def _plot_eigenvalues(result: SweepResult, path: str, plt) -> None:
         for i, pt in enumerate(branch.points):
             ev[i, :len(pt.eigenvalues)] = pt.eigenvalues
         label = f"branch {b + 1}" if len(result.branches) > 1 else None
-        ax.plot(ps, ev.real, ".", color=f"C{b % 10}", ms=3, label=label)
-        ax.plot(ps, np.abs(ev.imag), ":", color=f"C{b % 10}", lw=1.0)
+        for j in range(width):  # one legend entry per branch
+            ax.plot(ps, ev[:, j].real, ".", color=f"C{b % 10}", ms=3, label=label if j == 0 else None)
+            ax.plot(ps, np.abs(ev[:, j].imag), ":", color=f"C{b % 10}", lw=1.0)
     for bif in result.bifurcations:
         ax.plot([bif["value"]], [0.0], "o", color="k", ms=5)
         ax.annotate(bif["kind"], (bif["value"], 0.0), textcoords="offset points", xytext=(4, 4), fontsize=8)
+    values = np.array([x for branch in result.branches for pt in branch.points for v in pt.eigenvalues
+                       for x in (v.real, abs(v.imag)) if np.isfinite(x)])
+    if values.size:  # a few huge roots (a branch through a singular point) must not flatten the rest
+        lo, hi = np.percentile(values, [2, 98])
+        pad = 0.15 * max(hi - lo, 1e-9)
+        ax.set_ylim(min(lo, 0.0) - pad, max(hi, 0.0) + pad)
     ax.axhline(0, color="k", lw=0.6)
     ax.set_xlabel(result.parameter)
     ax.set_ylabel("eigenvalues: Re (dots), |Im| (dotted) [1/s]")
