@@ -94,7 +94,9 @@ def test_sweep_clones_rebuild_when_values_change_the_structure():
 
 @needs_cc
 @pytest.mark.slow
-@pytest.mark.parametrize("name", sorted(p.stem for p in SYSTEMS_DIR.glob("*.yaml")))
+# the bicycle (a minute here) is left out: its steady-motion pieces have their own cached = uncached test
+# (tests/test_nonholonomic.py) and its simulation takes the rolling disk's code path, which is in this list
+@pytest.mark.parametrize("name", sorted(p.stem for p in SYSTEMS_DIR.glob("*.yaml") if p.stem != "bicycle"))
 def test_cached_equals_uncached_for_every_bundled_model(name, private_cache, tmp_path, monkeypatch):
     """Cold (compiles and stores), warm (reads the cache) and uncached runs give identical numbers, also with the
     parameters listed in reverse order and a changed parameter value."""

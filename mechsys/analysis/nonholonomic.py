@@ -362,21 +362,14 @@ class NonholonomicProblem(EquilibriumProblem):
         q, u, a = np.zeros(self.n), np.zeros(self.n), np.zeros(self.n)
         for c, val in self.given.items():
             q[ix[c]] = val if values else 0.0
-        k = 0
-        for c in self.free:
-            q[ix[c]] = z[k]
-            k += 1
-        for c in self.rate_unknowns:
-            u[ix[c]] = z[k]
-            k += 1
         for c, val in self.fixed_rates.items():
             u[ix[c]] = val if values else 0.0
-        for c in self.dependent_rates:
-            u[ix[c]] = z[k]
-            k += 1
-        for c in self.dependent_rates:
-            a[ix[c]] = z[k]
-            k += 1
+        k = 0
+        for target, names in ((q, self.free), (u, self.rate_unknowns), (u, self.dependent_rates),
+                              (a, self.dependent_rates)):  # the layout of z (unknown_names)
+            for c in names:
+                target[ix[c]] = z[k]
+                k += 1
         return q, u, a, np.asarray(z[k:k + self.m], dtype=float)
 
     def _columns(self, v: dict) -> np.ndarray:
