@@ -201,3 +201,67 @@ def test_cached_pieces_equal_uncached_ones_and_skip_the_derivation(tmp_path, mon
     before = set(tmp_path.glob("*.json"))
     ConstrainedPieces(mechsys.load(DISK), "kane")  # another model: another key
     assert set(tmp_path.glob("*.json")) - before
+
+
+def test_compiled_pieces_are_cached_and_the_python_path_remains(tmp_path, monkeypatch):
+    """With a C compiler the pieces are compiled once into the cache (a signed library whose key includes the
+    source's hash) and loaded from there; MECHSYS_NATIVE=off keeps the generated Python, with the same numbers."""
+    import mechsys
+    from mechsys.analysis.nonholonomic import ConstrainedPieces
+    from mechsys.numeric.native import compiler
+
+    if compiler() is None:
+        pytest.skip("no C compiler")
+    monkeypatch.setenv("MECHSYS_CACHE", str(tmp_path))
+    first = ConstrainedPieces(mechsys.load(WHEEL), "kane")
+    libraries = list(tmp_path.glob("*.so"))
+    assert first._native is not None and len(libraries) == 1
+    again = ConstrainedPieces(mechsys.load(WHEEL), "kane")
+    assert again._native is not None and list(tmp_path.glob("*.so")) == libraries
+    monkeypatch.setenv("MECHSYS_NATIVE", "off")
+    python = ConstrainedPieces(mechsys.load(WHEEL), "kane")
+    assert python._native is None
+    rng = np.random.default_rng(8)
+    model = mechsys.load(WHEEL)
+    p = np.array(list(model.parameters.values()))
+    for _ in range(3):
+        state = (rng.normal(size=5), rng.normal(size=5), rng.normal(size=5), rng.normal(size=2), p)
+        x, y = again.evaluate(*state), python.evaluate(*state)
+        assert all(np.allclose(x[k], y[k], rtol=1e-14, atol=1e-14) for k in x)
+        assert np.allclose(again.residual(*state), python.residual(*state), rtol=1e-14, atol=1e-14)
+
+
+def test_a_narrow_terminal_folds_numbers_instead_of_cutting_them():
+    """rich cut -2.542378e-17 to '-2.542…' in an 80-column table of many columns: a silently wrong number.
+    Cells now fold onto a second line."""
+    from rich.console import Console
+
+    from mechsys.report.tables import Table, to_rich
+
+    t = Table("branches", ["branch", "v", "lean", "pitch", "steer", "chi", "stable", "verdict"])
+    t.add(1, 0.0497, -2.542378e-17, 2.645751, 8.628101e-17, -2.645751, False, "unstable (saddle)")
+    console = Console(width=60, record=True)
+    console.print(to_rich([t]))
+    text = console.export_text()
+    assert "…" not in text
+    rows = [line.split("│") for line in text.splitlines() if line.startswith("│")]
+    assert "".join(r[3].strip() for r in rows) == "-2.542378e-17"  # the lean column, line by line
+    assert "".join(r[5].strip() for r in rows) == "8.628101e-17"
+
+
+def test_a_long_table_prints_as_aligned_text_with_every_row():
+    """Thousands of sweep points print as plain aligned columns (rich measured every cell: half a minute)."""
+    from rich.console import Console
+
+    from mechsys.report.tables import LONG_TABLE, Table, to_rich
+
+    t = Table("branches over v", ["branch", "v", "lean"])
+    for k in range(LONG_TABLE + 5):
+        t.add(1, k * 0.1, -2.542378e-17 * k)
+    t.notes.append("a note")
+    console = Console(width=200, record=True)
+    console.print(to_rich([t]))
+    lines = console.export_text().splitlines()
+    assert lines[0] == "branches over v" and lines[1].split() == ["branch", "v", "lean"]
+    assert len(lines) == 3 + LONG_TABLE + 5 + 1 and lines[-1] == "  a note"
+    assert lines[-2].split() == ["1", "30.4", "-7.728829e-15"]

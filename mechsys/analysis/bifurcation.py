@@ -9,7 +9,8 @@ import numpy as np
 import sympy as sp
 
 from mechsys.analysis.continuation import Branch, sweep_parameter
-from mechsys.analysis.equilibria import EquilibriumProblem, make_problem, parameter_values, solve_equilibria, wrap
+from mechsys.analysis.equilibria import (EquilibriumProblem, drop_singular, make_problem, parameter_values,
+                                        singular_note, solve_equilibria, wrap)
 from mechsys.analysis.stability import ZERO_RE, assess, eigen, reduced_pencil
 from mechsys.errors import AnalysisError, InputError
 from mechsys.mechanics.model import MechanicalModel
@@ -48,17 +49,17 @@ def _dependence(model: MechanicalModel, name: str) -> tuple[sp.Symbol, dict[sp.S
     return base, full
 
 
-def parameter_sensitivity(model: MechanicalModel, name: str):
-    """d(parameter vector)/d(name): derived parameters follow the swept one (exact, from their expressions)."""
-    doc = model.doc
+def parameter_sensitivity(model: MechanicalModel, name: str) -> Callable[[np.ndarray], np.ndarray]:
+    """d(parameter vector)/d(name) as a function of the parameter vector: derived parameters follow the swept one
+    (exact, from their expressions; compiled once, as continuation asks at every step)."""
     base, full = _dependence(model, name)
-    derivs = [sp.diff(full[s], base) for s in model.parameter_symbols]
-
-    def at(values: dict[str, float]) -> np.ndarray:
-        subs = {doc.parameters[k]: sp.Float(float(v)) for k, v in values.items()}  # sympy Floats: d may be a Symbol
-        return np.array([float(sp.sympify(d).xreplace(subs).evalf()) for d in derivs])
-
-    return at
+    syms = model.parameter_symbols
+    derivs = [sp.sympify(sp.diff(full[s], base)) for s in syms]
+    if all(d.is_number for d in derivs):
+        constant = np.array([float(d) for d in derivs])
+        return lambda P: constant
+    fn = compile_exprs(derivs, syms)
+    return lambda P: np.array(fn(*P), dtype=float)
 
 
 def _given_rates(problem: EquilibriumProblem) -> list[sp.Expr]:
@@ -126,7 +127,6 @@ def swept_parameter(problem: EquilibriumProblem, name: str) -> SweptParameter:
     base, full = _dependence(model, name)
     sens = parameter_sensitivity(model, name)
     syms = model.parameter_symbols
-    names = [s.name for s in syms]
     exprs = _given_rates(problem)
     value = compile_exprs(exprs, syms) if exprs else None
     slope = [sp.diff(sp.sympify(e).xreplace(full), base) for e in exprs]
@@ -139,7 +139,7 @@ def swept_parameter(problem: EquilibriumProblem, name: str) -> SweptParameter:
             memo[p] = parameter_values(model, {name: p})
         return memo[p]
 
-    return SweptParameter(name, problem, pvec, lambda p, P: sens(dict(zip(names, P))),
+    return SweptParameter(name, problem, pvec, lambda p, P: sens(P),
                           lambda p, P: np.array(value(*P) if value else [], dtype=float),
                           lambda p, P: np.array(dvalue(*P), dtype=float) if dvalue else np.zeros(len(exprs)))
 
@@ -208,9 +208,11 @@ def sweep(model: MechanicalModel, name: str, start: float, stop: float, points: 
 
     starts = []
     undefined = []
+    singular: dict[str, list[np.ndarray]] = {}
     for p in np.linspace(lo, hi, 5):  # branches born inside the range need a start of their own
         try:
-            starts += [(z, float(p)) for z in solve_equilibria(problem, par.at(p), search)]
+            starts += [(z, float(p)) for z in drop_singular(problem, solve_equilibria(problem, par.at(p), search),
+                                                            par.at(p), singular)]
         except (ValueError, ArithmeticError) as exc:  # e.g. sqrt of a negative parameter: math domain error
             undefined.append(f"{name} = {p:g} ({exc})")
     span = hi - lo if hi > lo else 1.0
@@ -255,6 +257,9 @@ def sweep(model: MechanicalModel, name: str, start: float, stop: float, points: 
     result = SweepResult(name, names, angles, branches)
     if undefined:
         result.notes.append(f"the equations cannot be evaluated at {', '.join(undefined)}: no branch starts there")
+    if singular:
+        result.notes.append(f"starts at {name} = {', '.join(f'{v:g}' for v in np.linspace(lo, hi, 5))}: "
+                            + singular_note(problem, singular, "continued"))
     if artefacts:
         result.notes.append(f"{len(artefacts)} branch(es) at a gimbal-lock point are no steady motions in a regular "
                             "chart (artefacts of the singular angles) and are not listed")

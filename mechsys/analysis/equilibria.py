@@ -29,15 +29,20 @@ def parameter_values(model: MechanicalModel, changes: dict[str, float] | None = 
     doc = model.doc
     if not changes:
         return np.array([doc.parameter_values[n] for n in doc.parameters], dtype=float)
-    # sympy Floats, not Python floats: for an alias ``m1: m2`` the xreplace returns the value itself
-    values: dict[sp.Symbol, sp.Float] = {}
+    values: dict[sp.Symbol, float] = {}
+    moved: set[sp.Symbol] = set()  # the changed parameters and those defined from them: only these are evaluated
     for name, expr in doc.parameter_exprs.items():  # in dependency order
         sym = doc.parameters[name]
         if name in changes:
-            values[sym] = sp.Float(float(changes[name]))
+            values[sym] = float(changes[name])
+            moved.add(sym)
+        elif not expr.free_symbols & moved:
+            values[sym] = doc.parameter_values[name]
         else:
-            known = {s: values[s] for s in expr.free_symbols if s in values}
-            values[sym] = sp.Float(float(sp.sympify(expr.xreplace(known)).evalf()))
+            moved.add(sym)
+            # sympy Floats, not Python floats: for an alias ``m1: m2`` the xreplace returns the value itself
+            known = {s: sp.Float(values[s]) for s in expr.free_symbols if s in values}
+            values[sym] = float(sp.sympify(expr.xreplace(known)).evalf())
     return np.array([float(values[s]) for s in model.parameter_symbols], dtype=float)
 
 
@@ -261,6 +266,12 @@ class EquilibriumProblem:
         ang = self.is_angle()
         d[ang] = [wrap(x) for x in d[ang]]
         return float(np.linalg.norm(d[: self.nq + len(self.rate_unknowns)]))
+
+    def split_singularity(self, z: np.ndarray, p: np.ndarray) -> str | None:
+        """Why the coordinates the analysis eliminates are not determined at z (a coordinate singularity of the
+        model, not a steady motion one can linearize about), or None. Only systems with velocity constraints
+        eliminate coordinates and speeds (analysis/nonholonomic.py); gimbal locks are charts.py's."""
+        return None
 
     def equilibrium(self, z: np.ndarray) -> Equilibrium:
         z = self.normalize(z)
@@ -493,6 +504,32 @@ def solve_equilibria(problem: EquilibriumProblem, p: np.ndarray, search: dict | 
     return roots
 
 
+def drop_singular(problem: EquilibriumProblem, roots: list[np.ndarray], p: np.ndarray,
+                  dropped: dict[str, list[np.ndarray]] | None = None) -> list[np.ndarray]:
+    """The roots at which the coordinates the analysis eliminates are determined; the others (coordinate
+    singularities of the model: no linearization, no continuation, no verdict there) are added to ``dropped``
+    by reason (see singular_note)."""
+    kept = []
+    for z in roots:
+        why = problem.split_singularity(z, p)
+        if why is None:
+            kept.append(z)
+        elif dropped is not None:
+            dropped.setdefault(why, []).append(z)
+    return kept
+
+
+def singular_note(problem: EquilibriumProblem, dropped: dict[str, list[np.ndarray]], what: str = "listed") -> str:
+    """What drop_singular left out, in words, with one example."""
+    notes = []
+    for why, zs in dropped.items():
+        where = ", ".join(f"{c} = {wrap(v) if problem.angles.get(c, False) else v:.6g}"
+                          for c, v in zip(problem.free, zs[0]))
+        notes.append(f"{len(zs)} root(s) where {why} (e.g. {where}) are coordinate singularities of the model, not "
+                     f"steady motions one can linearize about: not {what}")
+    return "; ".join(notes)
+
+
 def is_new_root(problem: EquilibriumProblem, z: np.ndarray, roots: list[np.ndarray]) -> bool:
     """z is not a root already found: none closer than 1e-7 (1 + |z|) in the coordinates and rates (angles on the
     circle)."""
@@ -583,12 +620,13 @@ def find_equilibria(model: MechanicalModel, search: dict[str, tuple[float, float
         roots = solve_equilibria(problem, p, search, starts, seed, plan)
     from mechsys.analysis.charts import review, singularities
 
+    dropped: dict[str, list[np.ndarray]] = {}
+    roots = drop_singular(problem, roots, p, dropped)
     message = ""
     isolated = []
     family = None
     for z in roots:
-        J = problem.J(z, p)
-        sv = np.linalg.svd(J, compute_uv=False) if J.size else np.zeros(0)
+        sv = np.linalg.svd(_equilibrated(problem.J(z, p)), compute_uv=False)
         if sv.size and sv[-1] <= 1e-9 * max(1.0, sv[0]) and not singularities(model, problem.equilibrium(z).coordinates, p):
             family = family if family is not None else z  # not isolated: one representative of the continuum
         else:
@@ -601,7 +639,7 @@ def find_equilibria(model: MechanicalModel, search: dict[str, tuple[float, float
     for e in equilibria:
         assess(problem, e, p)
     equilibria, chart_note = review(problem, equilibria, p) if model.is_holonomic else (equilibria, "")
-    message = "; ".join(m for m in (message, chart_note) if m)
+    message = "; ".join(m for m in (message, chart_note, singular_note(problem, dropped)) if m)
     equilibria.sort(key=lambda e: tuple(e.coordinates.values()) + tuple(e.rates.values()))
     if not equilibria:
         message = (f"no equilibrium found: {plan.text()}; widen it with --search" if plan is not None
@@ -609,6 +647,15 @@ def find_equilibria(model: MechanicalModel, search: dict[str, tuple[float, float
     split = getattr(problem, "split", None)
     return EquilibriaResult(equilibria, message, problem.cyclic, dict(problem.fixed_rates), plan, exact,
                             split.text() if split is not None else "")
+
+
+def _equilibrated(J: np.ndarray) -> np.ndarray:
+    """J with unit columns, then unit rows: the same rank, but a conditioning that does not depend on the units of
+    the unknowns (a bicycle's multipliers are hundreds of newtons, its angles radians)."""
+    if not J.size:
+        return J
+    J = J / np.maximum(np.linalg.norm(J, axis=0), 1e-300)
+    return J / np.maximum(np.linalg.norm(J, axis=1), 1e-300)[:, None]
 
 
 def _every_state(problem: EquilibriumProblem, p: np.ndarray, search: dict | None) -> EquilibriaResult:

@@ -31,7 +31,9 @@ import sympy as sp
 from mechsys.analysis.equilibria import Equilibrium, EquilibriumProblem, parameter_values, wrap
 from mechsys.errors import AnalysisError, InputError
 from mechsys.mechanics.model import MechanicalModel
-from mechsys.numeric.lambdify import compile_exprs, function_from_source, generate_source, value_and_jacobian_sources
+from mechsys.numeric import native
+from mechsys.numeric.lambdify import (compile_exprs, function_from_source, generate_source,
+                                       value_and_jacobian_program, value_and_jacobian_sources)
 
 #: relative size below which a column, a singular value or a shift difference counts as zero
 ZERO = 1e-9
@@ -60,17 +62,34 @@ class ConstrainedPieces:
         key = cache.model_key(model, f"constrained-pieces-{method}")
         entry = cache.load(key)
         if not (isinstance(entry, dict) and entry.get("size") == self.size and isinstance(entry.get("source"), str)
-                and isinstance(entry.get("values"), str) and isinstance(entry.get("autonomous"), bool)):
-            values, source = self._sources(model, method)
-            entry = {"size": self.size, "values": values, "source": source, "autonomous": model.is_autonomous(method)}
+                and isinstance(entry.get("values"), str) and isinstance(entry.get("autonomous"), bool)
+                and "c" in entry and isinstance(entry["c"], (str, type(None)))):
+            values, source, c_source = self._sources(model, method)
+            entry = {"size": self.size, "values": values, "source": source, "c": c_source,
+                     "autonomous": model.is_autonomous(method)}
             cache.store(key, entry)
         self.autonomous = entry["autonomous"]
-        self._fn = function_from_source(entry["source"])
-        self._values = function_from_source(entry["values"])
+        self.n_args = 3 * self.n + self.m + len(model.parameter_symbols)
+        self._full_size = self._outputs + self.size * 2 * self.n
+        # the same code compiled by the system C compiler (numeric/native.py) when there is one: a bicycle's
+        # pieces in microseconds instead of milliseconds; the Python functions otherwise
+        self._native = native.load_program(key, entry["c"], {"mechsys_values": self.size,
+                                                              "mechsys_full": self._full_size}, self.n_args)
+        self._sources_text = (entry["source"], entry["values"])
+        self._last: tuple[bytes, dict] | None = None
 
-    def _sources(self, model: MechanicalModel, method: str) -> tuple[str, str]:
-        """E alone (what a line search evaluates); and E, M, A followed by dE/d(q, u) row by row (forward
-        differentiation of the CSE graph)."""
+    # the generated Python, checked and compiled only when it runs (no compiler, or a test comparing the two)
+    @cached_property
+    def _fn(self):
+        return function_from_source(self._sources_text[0])
+
+    @cached_property
+    def _values(self):
+        return function_from_source(self._sources_text[1])
+
+    def _sources(self, model: MechanicalModel, method: str) -> tuple[str, str, str | None]:
+        """Python sources of E alone (what a line search evaluates) and of E, M, A followed by dE/d(q, u) row by
+        row (forward differentiation of the CSE graph); the C source of both (None when there is no C form)."""
         eq = model.equations(method)
         rows = model.kin.constraints
         t0 = {model.t: 0}
@@ -81,21 +100,37 @@ class ConstrainedPieces:
         Phi = [r.position for r in rows if r.kind == "holonomic"]
         outputs = [sp.sympify(e).xreplace(t0) for e in list(R) + list(S) + g + Phi + list(eq.M) + list(eq.A)]
         args = [*model.q, *model.u, *model.a, *self.lam, *model.parameter_symbols]
-        _values, source = value_and_jacobian_sources(outputs, args, [*model.q, *model.u], rows=self.size)
-        return generate_source(outputs[:self.size], args), source
+        program = value_and_jacobian_program(outputs, args, [*model.q, *model.u], rows=self.size)
+        _values, source = value_and_jacobian_sources(outputs, args, [*model.q, *model.u], program=program)
+        c_source = native.program_source(program, {"mechsys_values": (self.size, False),
+                                                   "mechsys_full": (len(outputs), True)})
+        return generate_source(outputs[:self.size], args), source, c_source
 
     def residual(self, q, u, a, lam, p) -> np.ndarray:
         """E alone (no derivatives): what a line search evaluates."""
+        if self._native is not None:
+            return self._native("mechsys_values", np.concatenate([q, u, a, lam, p]))
         with np.errstate(all="ignore"):
             return np.asarray(self._values(*q, *u, *a, *lam, *p), dtype=float)
 
     def evaluate(self, q, u, a, lam, p) -> dict[str, np.ndarray]:
-        with np.errstate(all="ignore"):  # overflow far from the roots gives inf/nan, which the callers reject
-            out = np.asarray(self._fn(*q, *u, *a, *lam, *p), dtype=float)
+        """E, M, A, dE/dq and dE/du (the last point's are kept: a Jacobian and dF/dp at one point share them)."""
+        args = np.concatenate([q, u, a, lam, p]).astype(float)
+        tag = args.tobytes()
+        if self._last is not None and self._last[0] == tag:
+            return self._last[1]
+        if self._native is not None:
+            out = self._native("mechsys_full", args)
+        else:
+            with np.errstate(all="ignore"):  # overflow far from the roots gives inf/nan, which the callers reject
+                out = np.asarray(self._fn(*args), dtype=float)
         v = {key: out[s:s + shape[0] * shape[1]].reshape(shape) for key, (s, shape) in self.layout.items()}
         v["E"] = v["E"].ravel()
         jac = out[self._outputs:self._outputs + self.size * 2 * self.n].reshape(self.size, 2 * self.n)
         v["Eq"], v["Eu"] = jac[:, :self.n], jac[:, self.n:]
+        for block in v.values():
+            block.flags.writeable = False  # shared by the callers of the same point
+        self._last = (tag, v)
         return v
 
     def accelerations(self, q, u, p) -> tuple[np.ndarray, np.ndarray]:
@@ -391,6 +426,25 @@ class NonholonomicProblem(EquilibriumProblem):
 
     def F(self, z: np.ndarray, p: np.ndarray) -> np.ndarray:
         return self.pieces.residual(*self.full_state(z), p)
+
+    def split_singularity(self, z: np.ndarray, p: np.ndarray) -> str | None:
+        """The holonomic constraints do not determine the eliminated coordinates at z (their Jacobian in them
+        loses rank: the bicycle's front contact frame when the wheel lies flat), or the velocity constraints the
+        dependent speeds; None when both are regular."""
+        v = self._at(z, p)
+        n, m, ix = self.n, self.m, self._index
+        dep = self.split.dependent
+        blocks = [(v["A"], dep, "the velocity constraints do not determine " + ", ".join(f"der({c})" for c in dep))]
+        if self.mh:
+            elim = self.split.eliminated
+            blocks.insert(0, (v["Eq"][n + 2 * m:, :], elim,
+                              "the holonomic constraints do not determine " + ", ".join(elim)))
+        for rows, names, text in blocks:
+            sv = np.linalg.svd(rows[:, [ix[c] for c in names]], compute_uv=False)
+            scale = max(float(np.max(np.abs(rows), initial=0.0)), 1e-300)
+            if sv.size and (not np.all(np.isfinite(sv)) or sv[-1] <= 1e-8 * scale):
+                return text
+        return None
 
     def J(self, z: np.ndarray, p: np.ndarray) -> np.ndarray:
         return self._columns(self._at(z, p))

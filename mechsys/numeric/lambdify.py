@@ -4,6 +4,7 @@ sympy.lambdify walks the whole (unshared) expression tree several times to find 
 dominates for the long expressions of a chain; here CSE runs once and only its small results are printed."""
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Callable, Sequence
 
 import sympy as sp
@@ -12,7 +13,8 @@ from sympy.printing.pycode import PythonCodePrinter
 from mechsys.numeric.runtime import StateFunction, function_from_source, matrix_from_source
 
 __all__ = ["generate_source", "compile_exprs", "matrix_source", "compile_matrix", "function_from_source",
-           "matrix_from_source", "StateFunction", "value_and_jacobian_sources"]
+           "matrix_from_source", "StateFunction", "value_and_jacobian_sources", "value_and_jacobian_program",
+           "ForwardProgram"]
 
 
 class _Printer(PythonCodePrinter):
@@ -46,30 +48,40 @@ def generate_source(exprs: Sequence[sp.Expr], args: Sequence[sp.Symbol]) -> str:
     return "\n".join(lines)
 
 
-def value_and_jacobian_sources(exprs: Sequence[sp.Expr], args: Sequence[sp.Symbol], wrt: Sequence[sp.Symbol],
-                               rows: int | None = None) -> tuple[str, str]:
-    """Sources of ``_f(a0, a1, ...)`` returning ``exprs`` (first), and ``exprs`` followed by their Jacobian with
-    respect to ``wrt`` row by row (second), from one CSE: forward-mode differentiation of the CSE graph, each
-    shared subexpression differentiated once by the chain rule through its (small) defining expression. Exact
-    like sympy's ``jacobian`` but without re-differentiating whole unshared trees (the bicycle: seconds instead
-    of a minute). ``rows``: only the first ``rows`` expressions are differentiated (all by default). Derivatives
-    of subexpressions are generated on demand, so those only the undifferentiated outputs use cost nothing."""
-    names = {a: f"a{i}" for i, a in enumerate(args)}
+@dataclass
+class ForwardProgram:
+    """Straight-line code for some expressions and their Jacobian (value_and_jacobian_program): the shared
+    subexpressions ``x{k}``, the derivatives ``d{k}_{j}`` of those the Jacobian needs, the outputs, and the
+    Jacobian rows. Printed as Python (value_and_jacobian_sources) or C (numeric/native.py)."""
+
+    args: list  # the input symbols, printed a0, a1, ... (Python) or a[0], a[1], ... (C)
+    values: list  # (name, expression) of the shared subexpressions, in order
+    derivatives: list  # (name, expression) of their derivatives, in order (after all values)
+    symbols: dict  # the Symbol standing for each name of values and derivatives
+    outputs: list  # the expressions, in terms of the names
+    jacobian: list  # the Jacobian of the first ``rows`` outputs, row by row (0 where it vanishes)
+
+
+def value_and_jacobian_program(exprs: Sequence[sp.Expr], args: Sequence[sp.Symbol], wrt: Sequence[sp.Symbol],
+                               rows: int | None = None) -> ForwardProgram:
+    """``exprs`` and their Jacobian with respect to ``wrt`` from one CSE: forward-mode differentiation of the
+    CSE graph, each shared subexpression differentiated once by the chain rule through its (small) defining
+    expression. Exact like sympy's ``jacobian`` but without re-differentiating whole unshared trees (the bicycle:
+    seconds instead of a minute). ``rows``: only the first ``rows`` expressions are differentiated (all by
+    default). Derivatives of subexpressions are generated on demand, so those only the undifferentiated outputs
+    use cost nothing."""
     exprs = [sp.sympify(e) for e in exprs]
     replacements, reduced = sp.cse(exprs, order="none")
     column = {w: j for j, w in enumerate(wrt)}
     deriv: dict[sp.Symbol, dict[int, sp.Expr]] = {w: {j: sp.Integer(1)} for w, j in column.items()}
-    printer = _Printer(names)
-    plain = [f"def _f({', '.join(names[a] for a in args)}):"]
-
+    program = ForwardProgram(list(args), [], [], {}, list(reduced), [])
     values = {}
     order = []
     for k, (sym, value) in enumerate(replacements):
-        names[sym] = f"x{k}"
+        program.symbols[f"x{k}"] = sym
+        program.values.append((f"x{k}", value))
         values[sym] = value
         order.append(sym)
-        plain.append(f"    x{k} = {printer.doprint(value)}")
-    lines = list(plain)
     index = {sym: k for k, sym in enumerate(order)}
     needed: set = set()
     todo = [s for e in reduced[:rows] for s in e.free_symbols if s in index]
@@ -102,16 +114,32 @@ def value_and_jacobian_sources(exprs: Sequence[sp.Expr], args: Sequence[sp.Symbo
             own = {}
             for j, e in parts.items():
                 d = sp.Symbol(f"_d{k}_{j}")
-                names[d] = f"d{k}_{j}"
-                lines.append(f"    d{k}_{j} = {printer.doprint(e)}")
+                program.symbols[f"d{k}_{j}"] = d
+                program.derivatives.append((f"d{k}_{j}", e))
                 own[j] = d
             deriv[sym] = own
-    outputs = [printer.doprint(e) for e in reduced]
-    plain.append("    return [" + ", ".join(outputs) + "]")
     for e in reduced[:rows]:
         row = chain(e)
-        outputs += [printer.doprint(row[j]) if j in row else "0.0" for j in range(len(wrt))]
-    lines.append("    return [" + ", ".join(outputs) + "]")
+        program.jacobian += [row.get(j, sp.Integer(0)) for j in range(len(wrt))]
+    return program
+
+
+def value_and_jacobian_sources(exprs: Sequence[sp.Expr], args: Sequence[sp.Symbol], wrt: Sequence[sp.Symbol],
+                               rows: int | None = None,
+                               program: ForwardProgram | None = None) -> tuple[str, str]:
+    """Python sources of ``_f(a0, a1, ...)`` returning ``exprs`` (first), and ``exprs`` followed by their Jacobian
+    with respect to ``wrt`` row by row (second): value_and_jacobian_program printed (or ``program`` when given)."""
+    program = program or value_and_jacobian_program(exprs, args, wrt, rows)
+    names = {a: f"a{i}" for i, a in enumerate(program.args)}
+    names.update({sym: name for name, sym in program.symbols.items()})
+    printer = _Printer(names)
+    plain = [f"def _f({', '.join(names[a] for a in program.args)}):"]
+    plain += [f"    {name} = {printer.doprint(value)}" for name, value in program.values]
+    lines = plain + [f"    {name} = {printer.doprint(value)}" for name, value in program.derivatives]
+    outputs = [printer.doprint(e) for e in program.outputs]
+    jacobian = [printer.doprint(e) if e != 0 else "0.0" for e in program.jacobian]
+    plain = plain + ["    return [" + ", ".join(outputs) + "]"]
+    lines.append("    return [" + ", ".join(outputs + jacobian) + "]")
     return "\n".join(plain), "\n".join(lines)
 
 

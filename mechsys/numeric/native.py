@@ -134,8 +134,9 @@ def model_source(model) -> str:
     return "\n".join(head) + "\n" + TEMPLATE.read_text(encoding="utf-8")
 
 
-def build(source: str, target: Path) -> None:
-    """Compile ``source`` into the shared library ``target`` (atomically: a partial file never appears)."""
+def build(source: str, target: Path, opt: str | None = None) -> None:
+    """Compile ``source`` into the shared library ``target`` (atomically: a partial file never appears) at the
+    optimisation level ``opt`` (by default -O2, -O1 for very long sources)."""
     cc = compiler()
     if cc is None:
         raise AnalysisError("no C compiler found for the native integrator (set CC or use --method DOP853)")
@@ -143,7 +144,7 @@ def build(source: str, target: Path) -> None:
         c_file = Path(tmp) / "model.c"
         c_file.write_text(source, encoding="utf-8")
         so_file = Path(tmp) / "model.so"
-        opt = "-O2" if len(source) < 2_000_000 else "-O1"
+        opt = opt or ("-O2" if len(source) < 2_000_000 else "-O1")
         proc = subprocess.run([cc, opt, "-std=gnu99", "-fPIC", "-shared", "-o", str(so_file), str(c_file), "-lm"],
                               capture_output=True, text=True)
         if proc.returncode != 0:
@@ -266,3 +267,80 @@ def load(model) -> Optional[NativeIntegrator]:
         result.key = key if path is not None else None
     model._native_integrator = result
     return result
+
+
+# ----------------------------------------------------------------------------------------- straight-line programs
+def program_source(program, functions: dict[str, tuple[int, bool]]) -> Optional[str]:
+    """C translation unit of a ForwardProgram (numeric/lambdify.py): for each ``name: (count, with_jacobian)`` of
+    ``functions`` a function ``name(const double *a, double *out)`` writing the first ``count`` outputs (and then
+    the Jacobian rows); the compiler drops the subexpressions a function does not use. None when an expression
+    has no C form (the caller keeps the Python code)."""
+    import sympy as sp
+
+    names = {a: f"a[{i}]" for i, a in enumerate(program.args)}
+    names.update({sym: name for name, sym in program.symbols.items()})
+    printer = _c_printer(names)
+    values = [f"    const double {name} = {printer.doprint(e)};" for name, e in program.values]
+    derivatives = [f"    const double {name} = {printer.doprint(e)};" for name, e in program.derivatives]
+    outputs = [printer.doprint(sp.sympify(e)) for e in program.outputs]
+    jacobian = [printer.doprint(e) if e != 0 else "0.0" for e in program.jacobian]
+    if getattr(printer, "_not_supported", None):
+        return None
+    parts = ["#include <math.h>", "#ifndef M_PI", "#define M_PI 3.14159265358979323846", "#endif"]
+    for name, (count, with_jacobian) in functions.items():
+        body = values + (derivatives if with_jacobian else [])
+        results = outputs[:count] + (jacobian if with_jacobian else [])
+        parts.append(f"void {name}(const double *a, double *out) {{")
+        parts += body + [f"    out[{i}] = {e};" for i, e in enumerate(results)] + ["}"]
+    return "\n".join(parts) + "\n"
+
+
+class Program:
+    """Compiled straight-line functions of one argument vector (program_source), called through ctypes."""
+
+    def __init__(self, path: Path, functions: dict[str, int], n_args: int) -> None:
+        self._lib = ctypes.CDLL(str(path))
+        self.n_args = n_args
+        self._functions = {}
+        dp = ctypes.POINTER(ctypes.c_double)
+        for name, size in functions.items():
+            fn = getattr(self._lib, name)
+            fn.argtypes = [dp, dp]
+            fn.restype = None
+            self._functions[name] = (fn, size)
+
+    def __call__(self, name: str, args: np.ndarray) -> np.ndarray:
+        fn, size = self._functions[name]
+        a = np.ascontiguousarray(args, dtype=float)
+        if a.shape != (self.n_args,):  # the C code reads by position without bounds
+            raise AnalysisError(f"compiled function {name}: {a.size} arguments given, it takes {self.n_args}")
+        out = np.empty(size)
+        fn(a.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), out.ctypes.data_as(ctypes.POINTER(ctypes.c_double)))
+        return out
+
+
+def load_program(key: str, source: Optional[str], functions: dict[str, int], n_args: int) -> Optional[Program]:
+    """The compiled program ``key`` from the cache (signature verified) or built from ``source`` now; None without
+    a compiler, without source, or when compiling fails (the caller keeps its Python code)."""
+    from mechsys.numeric import cache
+
+    if compiler() is None or source is None:
+        return None
+    import hashlib
+
+    # machine code: the key names the platform, and the source itself (so it always matches the Python code)
+    digest = hashlib.sha256(source.encode()).hexdigest()[:16]
+    key = f"{key}-{sys.platform}-{platform.machine()}-{digest}"
+    path = cache.library(key)
+    if path is not None:
+        return Program(path, functions, n_args)
+    try:
+        with tempfile.TemporaryDirectory(prefix="mechsys-program-") as tmp:
+            built = Path(tmp) / f"{key}.so"
+            # straight-line code: -O0 compiles the bicycle's pieces in a second, -O2 in half a minute, and runs
+            # them as fast (the time goes to the call and the memory traffic)
+            build(source, built, "-O0")
+            path = cache.store_library(key, built)
+            return Program(path or built, functions, n_args)  # loaded before the temporary folder goes
+    except (AnalysisError, OSError):
+        return None

@@ -77,6 +77,20 @@ def to_latex(tables: list[Table]) -> str:
     return "\n".join(out)
 
 
+#: rows above which a table is printed as aligned plain text: rich measures every cell of every row (a sweep's
+#: thousands of branch points took half a minute to print)
+LONG_TABLE = 300
+
+
+def _plain_text(t: Table, Text):
+    """A long table as aligned columns under its title (numbers as in every format, never cut)."""
+    cells = [list(t.columns)] + [[_cell(c) for c in row] for row in t.rows]
+    widths = [max(len(r[k]) for r in cells) for k in range(len(t.columns))]
+    lines = ["  ".join(c.ljust(w) for c, w in zip(r, widths)).rstrip() for r in cells]
+    lines.insert(1, "  ".join("-" * w for w in widths))
+    return Text("\n".join([t.title, *lines]), overflow="fold")
+
+
 def to_rich(tables: list[Table]):
     from rich.console import Group
     from rich.table import Table as RichTable
@@ -86,11 +100,15 @@ def to_rich(tables: list[Table]):
 
     parts = []
     for t in tables:
+        if len(t.rows) > LONG_TABLE:
+            parts.append(_plain_text(t, Text))
+            parts += [Text(f"  {n}") for n in t.notes]
+            continue
         rt = RichTable(title=escape(t.title))
-        for c in t.columns:
-            rt.add_column(escape(c))
+        for c in t.columns:  # a narrow terminal folds a number onto two lines, never cuts it ("-2.54…" of -2.54e-17)
+            rt.add_column(escape(c), overflow="fold")
         for row in t.rows:
-            rt.add_row(*[Text(_cell(c)) for c in row])
+            rt.add_row(*[Text(_cell(c), overflow="fold") for c in row])
         parts.append(rt)
         parts += [Text(f"  {n}") for n in t.notes]
     return Group(*parts)
