@@ -273,8 +273,8 @@ def load(model) -> Optional[NativeIntegrator]:
 def program_source(program, functions: dict[str, tuple[int, bool]]) -> Optional[str]:
     """C translation unit of a ForwardProgram (numeric/lambdify.py): for each ``name: (count, with_jacobian)`` of
     ``functions`` a function ``name(const double *a, double *out)`` writing the first ``count`` outputs (and then
-    the Jacobian rows); the compiler drops the subexpressions a function does not use. None when an expression
-    has no C form (the caller keeps the Python code)."""
+    the Jacobian rows); every function computes all shared subexpressions (at -O0 none is dropped; the bicycle's
+    residual alone still takes 20 us). None when an expression has no C form (the caller keeps the Python code)."""
     import sympy as sp
 
     names = {a: f"a[{i}]" for i, a in enumerate(program.args)}
