@@ -223,6 +223,30 @@ def test_a_branch_cut_by_the_step_limit_says_so():
     assert len(merged) == 1 and merged[0].truncated
 
 
+def test_an_auxiliary_unknown_weighted_down_in_the_arclength_is_still_solved_to_full_accuracy():
+    """An auxiliary unknown that grows by orders of magnitude along the branch (a bicycle's multipliers with the
+    square of a growing yaw rate) took every step of the arclength: the branch ended at the step limit at a tenth
+    of the range. Weighted down (a large x_scale), the branch crosses the range; with tol_scale it is still solved
+    to the full tolerance (closed form: x2 = 1e4 x1^4, x1 = p)."""
+    def F(x, p):
+        return np.array([x[0] - p, x[1] - 1e4 * x[0] ** 4])
+
+    def Fx(x, p):
+        return np.array([[1.0, 0.0], [-4e4 * x[0] ** 3, 1.0]])
+
+    Fp = lambda x, p: np.array([-1.0, 0.0])                      # noqa: E731
+    eig = lambda x, p: np.array([-1.0 + 0j, -1.0 + 0j])          # noqa: E731
+    opts = dict(ds=0.05, ds_max=0.1, max_steps=300)
+    plain = continue_branch(F, Fx, Fp, [0.0, 0.0], 0.0, 0.0, 10.0, eig, **opts)
+    assert plain.truncated and plain.points[-1].p < 2.0
+    weighted = continue_branch(F, Fx, Fp, [0.0, 0.0], 0.0, 0.0, 10.0, eig, x_scale=[1.0, 1e9],
+                               tol_scale=[1.0, 1.0], **opts)
+    assert not weighted.truncated and weighted.points[-1].p == 10.0 and len(weighted.points) < 150
+    for pt in weighted.points:
+        assert abs(pt.x[0] - pt.p) <= 1e-12 * (1 + pt.p)
+        assert abs(pt.x[1] - 1e4 * pt.p ** 4) <= 1e-9 * (1 + 1e4 * pt.p ** 4)
+
+
 def test_equilibria_sweep_step_limit_follows_the_points(monkeypatch):
     """bifurcation.sweep asks for enough steps to cross the range at the requested resolution, and reports a
     truncated branch in the notes of its table."""
@@ -600,3 +624,21 @@ def test_the_continuation_examples_of_the_docs_are_what_the_tool_prints(command)
         assert {k: got[k] for k in ("kind", "parameter")} == {k: want[k] for k in ("kind", "parameter")}
         assert got["value"] == pytest.approx(want["value"], abs=1e-9)
         assert got["coordinates"] == pytest.approx(want["coordinates"], abs=1e-9)
+
+
+def test_parameters_defined_from_a_swept_one_follow_it_and_an_override_cuts_the_link():
+    """parameter_values remembers which parameters follow a changed one (a continuation sets the same parameter
+    thousands of times); the memo belongs to the definitions: after --set dM=2 (with_overrides), dM no longer
+    follows Mo, even when the original model was asked first."""
+    import mechsys
+    from mechsys.analysis.equilibria import parameter_values
+    from tests.helpers import SYSTEMS_DIR
+
+    model = mechsys.load(SYSTEMS_DIR / "centrifuge.yaml")
+    names = [str(s) for s in model.parameter_symbols]
+    moved = dict(zip(names, parameter_values(model, {"Mo": 70.0})))
+    assert moved["Mo"] == 70.0 and moved["dM"] == pytest.approx(10.0)
+    fixed = model.with_overrides({"dM": 2.0})
+    again = dict(zip(names, parameter_values(fixed, {"Mo": 70.0})))
+    assert again["Mo"] == 70.0 and again["dM"] == 2.0
+    assert dict(zip(names, parameter_values(model, {"Mo": 14.0})))["dM"] == pytest.approx(2.0)

@@ -116,6 +116,7 @@ class SweptParameter:
 
 
 _RATE = re.compile(r"der\(\s*([A-Za-z_][A-Za-z_0-9]*)\s*\)")
+AUX_ARC_WEIGHT = 1e3  # an auxiliary unknown (dependent rate, acceleration, multiplier) counts 1e-3 in the arclength
 
 
 def swept_parameter(problem: EquilibriumProblem, name: str) -> SweptParameter:
@@ -188,7 +189,9 @@ def sweep(model: MechanicalModel, name: str, start: float, stop: float, points: 
     rows: list[int] | slice = slice(None)  # the equations continued on (a square system), chosen below
     # continuation measures arclength in the unknowns it is given: auxiliary unknowns of large size (a bicycle's
     # multipliers, hundreds of newtons) would shrink its steps in the parameter, so a problem may scale them down
-    # (the unknowns the branches report are never scaled)
+    # (the unknowns the branches report are never scaled); and as they can grow by orders of magnitude along a
+    # branch (multipliers with the square of a growing yaw rate), they are also weighted down in the arclength
+    # (they follow from the reported unknowns; Newton still solves them to the full tolerance)
     D = np.ones(len(problem.unknowns))
 
     def F(z, p):
@@ -227,9 +230,11 @@ def sweep(model: MechanicalModel, name: str, start: float, stop: float, points: 
             return False
 
     scale = getattr(problem, "auxiliary_scale", None)
+    arc = None  # the arclength weights: auxiliary unknowns count 1/AUX_ARC_WEIGHT of a reported one
     if scale is not None and starts:
         D = scale([z for z, _ in starts])
         starts = [(z / D, p) for z, p in starts]
+        arc = np.where(np.arange(len(D)) >= len(problem.free) + len(problem.rate_unknowns), AUX_ARC_WEIGHT, 1.0)
     keep = [smooth(z, p) for z, p in starts]  # not smooth: e.g. d sqrt(mu)/d mu at mu = 0
     undefined += [f"{name} = {p:g} (the derivatives of the equations are not finite there)"
                   for p in sorted({p for (_, p), ok in zip(starts, keep) if not ok})]
@@ -238,7 +243,8 @@ def sweep(model: MechanicalModel, name: str, start: float, stop: float, points: 
     try:
         branches = sweep_parameter(F, Fx, Fp, starts, lo, hi, eig, ds=step / 2,
                                    ds_max=min(step, 0.2 * max(span, 1.0)), tol_re=ZERO_RE * 10,
-                                   max_steps=max(2000, 20 * points)) if starts else []
+                                   max_steps=max(2000, 20 * points), x_scale=arc,
+                                   tol_scale=None if arc is None else np.ones(len(arc))) if starts else []
     except (ValueError, ArithmeticError) as exc:
         raise AnalysisError(f"--sweep {name}: {exc}") from None
     for branch in branches:  # back to the problem's unknowns

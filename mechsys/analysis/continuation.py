@@ -66,19 +66,27 @@ def _is_real(ev: np.ndarray) -> np.ndarray:
     return np.abs(ev.imag) <= 1e-7 * (1.0 + np.abs(ev))
 
 
+def _scale(value, n: int, name: str) -> np.ndarray:
+    if value is None:
+        return np.ones(n)
+    out = np.broadcast_to(np.asarray(value, dtype=float), (n,)).copy()
+    if not np.all(np.isfinite(out)) or np.any(out <= 0.0):
+        raise ValueError(f"{name} must be positive and finite")
+    return out
+
+
 class _Tracer:
-    """The scaled problem: z = (x / x_scale, p); the arclength and all tangents live in z."""
+    """The scaled problem: z = (x / x_scale, p); the arclength and all tangents live in z. Newton's convergence
+    is judged in x / tol_scale (default: x_scale), so unknowns weighted down in the arclength (a large x_scale)
+    are still solved to the full tolerance."""
 
     def __init__(self, F: ArrayFn, Fx: ArrayFn, Fp: ArrayFn, eig: ArrayFn, n: int, x_scale, tol: float,
-                 tol_re: float) -> None:
+                 tol_re: float, tol_scale=None) -> None:
         self.F, self.Fx, self.Fp, self.eig = F, Fx, Fp, eig
         self.n = n
-        if x_scale is None:
-            self.s = np.ones(n)
-        else:
-            self.s = np.broadcast_to(np.asarray(x_scale, dtype=float), (n,)).copy()
-            if not np.all(np.isfinite(self.s)) or np.any(self.s <= 0.0):
-                raise ValueError("x_scale must be positive and finite")
+        self.s = _scale(x_scale, n, "x_scale")
+        # z -> tolerance units: (x / tol_scale, p)
+        self.r = np.append(self.s / (_scale(tol_scale, n, "tol_scale") if tol_scale is not None else self.s), 1.0)
         self.tol, self.tol_re = tol, tol_re
 
     # -- conversions and evaluations --------------------------------------------------------------
@@ -125,15 +133,15 @@ class _Tracer:
             if not np.all(np.isfinite(dz)):
                 return None
             z = z + dz
-            step = float(np.max(np.abs(dz)))
-            zmax = 1.0 + float(np.max(np.abs(z)))
+            step = float(np.max(np.abs(dz * self.r)))
+            zmax = 1.0 + float(np.max(np.abs(z * self.r)))
             if step <= self.tol * zmax:
                 # a least-squares step on a singular Jacobian can be tiny without solving F = 0: check F
                 try:
                     res = float(np.max(np.abs(self.residual(z)), initial=0.0))
                 except (ArithmeticError, ValueError):
                     return None
-                if res <= 1e3 * self.tol * (1.0 + float(np.max(np.abs(A))) * zmax):
+                if res <= 1e3 * self.tol * (1.0 + float(np.max(np.abs(A / self.r))) * zmax):
                     return z, k
                 return None
             if monotone and k >= 2 and step > 2.0 * prev:
@@ -514,7 +522,7 @@ class _Continuation:
 
 def _setup(F: ArrayFn, Fx: ArrayFn, Fp: ArrayFn, x0, p0: float, p_min: float, p_max: float, eig: ArrayFn,
            ds: float, ds_min: float, ds_max: float, max_steps: int, tol: float, tol_re: float,
-           x_scale) -> tuple[_Continuation, np.ndarray]:
+           x_scale, tol_scale=None) -> tuple[_Continuation, np.ndarray]:
     if not p_min < p_max:
         raise ValueError(f"continuation: need p_min < p_max, got [{p_min}, {p_max}]")
     if not (0.0 < ds_min <= ds_max and ds > 0.0):
@@ -522,7 +530,7 @@ def _setup(F: ArrayFn, Fx: ArrayFn, Fp: ArrayFn, x0, p0: float, p_min: float, p_
     if not p_min <= p0 <= p_max:
         raise ValueError(f"continuation: start parameter p0={p0} is outside [{p_min}, {p_max}]")
     x0 = np.atleast_1d(np.asarray(x0, dtype=float)).ravel()
-    tr = _Tracer(F, Fx, Fp, eig, len(x0), x_scale, tol, tol_re)
+    tr = _Tracer(F, Fx, Fp, eig, len(x0), x_scale, tol, tol_re, tol_scale)
     z = tr.correct_fixed_p(tr.z_of(x0, p0), max_iter=_MAX_START_ITER, monotone=False)
     if z is None:
         try:
@@ -543,14 +551,17 @@ def _setup(F: ArrayFn, Fx: ArrayFn, Fp: ArrayFn, x0, p0: float, p_min: float, p_
 def continue_branch(F: ArrayFn, Fx: ArrayFn, Fp: ArrayFn, x0: np.ndarray | Sequence[float], p0: float,
                     p_min: float, p_max: float, eig: ArrayFn, *, ds: float = 0.05, ds_min: float = 1e-6,
                     ds_max: float = 0.5, max_steps: int = 2000, tol: float = 1e-10, tol_re: float = 1e-9,
-                    direction: float = +1.0, x_scale: float | np.ndarray | None = None) -> Branch:
+                    direction: float = +1.0, x_scale: float | np.ndarray | None = None,
+                    tol_scale: float | np.ndarray | None = None) -> Branch:
     """Follow the branch F(x, p) = 0 through (x0, p0) by pseudo-arclength continuation, in one direction.
 
     The start is corrected by Newton at fixed p0 (``ValueError`` if that fails). The first tangent is the null
     vector of [Fx | Fp], oriented so that dp has the sign of ``direction``; if dp ~ 0 at the start (a start at a
     fold) it is oriented so that its first nonzero component has the sign of ``direction`` (positive for +1), and
     a fold exactly at the start is not reported (``sweep_parameter`` reports it). Arclength is measured in
-    (x / x_scale, p). The branch ends when p leaves [p_min, p_max] (the last point is placed exactly on the
+    (x / x_scale, p): a large x_scale weights an unknown down (an auxiliary unknown that grows along the branch
+    would otherwise take the steps), while Newton still solves it to ``tol`` relative to ``tol_scale`` (default
+    x_scale). The branch ends when p leaves [p_min, p_max] (the last point is placed exactly on the
     bound), after ``max_steps`` steps (``truncated``), when the step would drop below ``ds_min`` (the corrector
     fails even there: the equations are not smooth, or not defined, beyond; ``stalled`` records p), or when it
     closes on its start (the last point then repeats the first). Events are located between consecutive points:
@@ -564,7 +575,8 @@ def continue_branch(F: ArrayFn, Fx: ArrayFn, Fp: ArrayFn, x0: np.ndarray | Seque
     """
     if not direction:
         raise ValueError("continue_branch: direction must be nonzero")
-    cont, z0 = _setup(F, Fx, Fp, x0, p0, p_min, p_max, eig, ds, ds_min, ds_max, max_steps, tol, tol_re, x_scale)
+    cont, z0 = _setup(F, Fx, Fp, x0, p0, p_min, p_max, eig, ds, ds_min, ds_max, max_steps, tol, tol_re, x_scale,
+                      tol_scale)
     return cont.run(z0, direction)[0]
 
 
@@ -602,17 +614,17 @@ def sweep_parameter(F: ArrayFn, Fx: ArrayFn, Fp: ArrayFn, starts: list[tuple[np.
     """
     kw = dict(kw)
     kw.pop("direction", None)
-    opts = {k: kw[k] for k in ("ds", "ds_min", "ds_max", "max_steps", "tol", "tol_re", "x_scale") if k in kw}
+    opts = {k: kw[k] for k in ("ds", "ds_min", "ds_max", "max_steps", "tol", "tol_re", "x_scale", "tol_scale")
+            if k in kw}
     unknown = set(kw) - set(opts)
     if unknown:
         raise TypeError(f"sweep_parameter: unknown options {sorted(unknown)}")
-    defaults = dict(ds=0.05, ds_min=1e-6, ds_max=0.5, max_steps=2000, tol=1e-10, tol_re=1e-9, x_scale=None)
+    defaults = dict(ds=0.05, ds_min=1e-6, ds_max=0.5, max_steps=2000, tol=1e-10, tol_re=1e-9, x_scale=None,
+                    tol_scale=None)
     defaults.update(opts)
     out: list[tuple[_Continuation, Branch]] = []
     for x0, p0 in starts:
-        cont, z0 = _setup(F, Fx, Fp, x0, p0, p_min, p_max, eig, defaults["ds"], defaults["ds_min"],
-                          defaults["ds_max"], defaults["max_steps"], defaults["tol"], defaults["tol_re"],
-                          defaults["x_scale"])
+        cont, z0 = _setup(F, Fx, Fp, x0, p0, p_min, p_max, eig, **defaults)
         if any(_on_branch(cont, br, z0) for _, br in out):
             continue
         fwd, closed = cont.run(z0, +1.0)

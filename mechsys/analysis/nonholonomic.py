@@ -391,35 +391,39 @@ class NonholonomicProblem(EquilibriumProblem):
         return False
 
     # ------------------------------------------------------------------------------------- state maps
+    @cached_property
+    def _layout(self) -> tuple[np.ndarray, np.ndarray]:
+        """Where the entries of z (unknown_names, multipliers excluded) go in the stacked (q, u, a) of 3n entries."""
+        ix, n = self._index, self.n
+        where = ([ix[c] for c in self.free] + [n + ix[c] for c in self.rate_unknowns]
+                 + [n + ix[c] for c in self.dependent_rates] + [2 * n + ix[c] for c in self.dependent_rates])
+        return np.array(where, dtype=int), np.arange(len(where))
+
     def full_state(self, z: np.ndarray, values: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(q, u, a, lambda) of the unknown vector z; values=False: of a direction (given values left at 0)."""
-        ix = self._index
-        q, u, a = np.zeros(self.n), np.zeros(self.n), np.zeros(self.n)
-        for c, val in self.given.items():
-            q[ix[c]] = val if values else 0.0
-        for c, val in self.fixed_rates.items():
-            u[ix[c]] = val if values else 0.0
-        k = 0
-        for target, names in ((q, self.free), (u, self.rate_unknowns), (u, self.dependent_rates),
-                              (a, self.dependent_rates)):  # the layout of z (unknown_names)
-            for c in names:
-                target[ix[c]] = z[k]
-                k += 1
-        return q, u, a, np.asarray(z[k:k + self.m], dtype=float)
+        ix, n = self._index, self.n
+        qua = np.zeros(3 * n)
+        if values:
+            for c, val in self.given.items():
+                qua[ix[c]] = val
+            for c, val in self.fixed_rates.items():
+                qua[n + ix[c]] = val
+        where, k = self._layout
+        z = np.asarray(z, dtype=float)
+        qua[where] = z[k]
+        return qua[:n], qua[n:2 * n], qua[2 * n:], z[len(k):len(k) + self.m]
 
     def _columns(self, v: dict) -> np.ndarray:
         """dE/dz from dE/dq, dE/du and the blocks of a and lambda."""
-        ix = self._index
         n, m = self.n, self.m
-        Ea = np.zeros((self.pieces.size, n))
-        Ea[:n] = v["M"]
-        Ea[n:n + m] = v["A"]
-        El = np.zeros((self.pieces.size, m))
-        El[:n] = -v["A"].T
-        cols = [v["Eq"][:, ix[c]] for c in self.free] + [v["Eu"][:, ix[c]] for c in self.rate_unknowns]
-        cols += [v["Eu"][:, ix[c]] for c in self.dependent_rates] + [Ea[:, ix[c]] for c in self.dependent_rates]
-        out = np.column_stack(cols) if cols else np.zeros((self.pieces.size, 0))
-        return np.hstack([out, El]) if m else out
+        size = self.pieces.size
+        full = np.zeros((size, 3 * n + m))  # d/dq, d/du, d/da, d/dlambda of E
+        full[:, :2 * n] = np.hstack([v["Eq"], v["Eu"]])
+        full[:n, 2 * n:3 * n] = v["M"]
+        full[n:n + m, 2 * n:3 * n] = v["A"]
+        full[:n, 3 * n:] = -v["A"].T
+        where = self._layout[0]
+        return full[:, np.concatenate([where, 3 * n + np.arange(m)])]
 
     def _at(self, z: np.ndarray, p: np.ndarray) -> dict:
         return self.pieces.evaluate(*self.full_state(z), p)
@@ -534,14 +538,26 @@ class NonholonomicProblem(EquilibriumProblem):
         return self.full_state(self.state(e))
 
     # ------------------------------------------------------------------------------------- linearization
+    def linearization(self, e: Equilibrium, p: np.ndarray | None) -> SteadyLinearization:
+        """linearize_steady, remembered per point: a sweep's eigenvalues and its point verdicts linearize about
+        the same points (the key is every number the linearization reads: q, u, a, lambda and the parameters)."""
+        p = parameter_values(self.model) if p is None else np.asarray(p, dtype=float)
+        key = b"".join(np.asarray(x, dtype=float).tobytes() for x in (*self.point(e), p))
+        memo = self.__dict__.setdefault("_linearizations", {})
+        if key not in memo:
+            if len(memo) >= 20000:
+                memo.clear()
+            memo[key] = linearize_steady(self, e, p)
+        return memo[key]
+
     def pencil(self, e: Equilibrium) -> tuple[np.ndarray, np.ndarray, None]:
         """(A, I): the reduced Jacobian with the structural zero directions removed (continuation's eigenvalues)."""
-        lin = linearize_steady(self, e, getattr(self, "current_parameters", None))
+        lin = self.linearization(e, getattr(self, "current_parameters", None))
         return lin.deflated, np.eye(lin.deflated.shape[0]), None
 
     def assess(self, e: Equilibrium, p: np.ndarray) -> None:
         self.current_parameters = p
-        lin = linearize_steady(self, e, p)
+        lin = self.linearization(e, p)
         vals = lin.eigenvalues
         e.eigenvalues, e.jacobian = vals, lin.jacobian
         e.structural = lin.structural_text()

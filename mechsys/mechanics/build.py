@@ -661,6 +661,11 @@ def _identically_zero(expr: sp.Expr, values: dict) -> bool:
     for _ in range(4):
         subs = {s: values.get(s, rng.uniform(-1.3, 1.7)) for s in symbols}
         try:
+            # machine-precision substitution first (20x faster than evalf on a rolling row): a value far from 0
+            # settles it; a small one is re-evaluated with evalf's adaptive precision (cancellation)
+            rough = expr.xreplace({s: sp.Float(v) for s, v in subs.items()})
+            if rough.is_Number and abs(complex(rough)) > 1e-6:
+                return False
             val = complex(expr.evalf(subs=subs))
         except (TypeError, ValueError):
             return False

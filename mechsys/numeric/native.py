@@ -302,10 +302,9 @@ class Program:
         self._lib = ctypes.CDLL(str(path))
         self.n_args = n_args
         self._functions = {}
-        dp = ctypes.POINTER(ctypes.c_double)
         for name, size in functions.items():
             fn = getattr(self._lib, name)
-            fn.argtypes = [dp, dp]
+            fn.argtypes = [ctypes.c_void_p, ctypes.c_void_p]  # raw addresses: data_as() costs more than the call
             fn.restype = None
             self._functions[name] = (fn, size)
 
@@ -315,7 +314,7 @@ class Program:
         if a.shape != (self.n_args,):  # the C code reads by position without bounds
             raise AnalysisError(f"compiled function {name}: {a.size} arguments given, it takes {self.n_args}")
         out = np.empty(size)
-        fn(a.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), out.ctypes.data_as(ctypes.POINTER(ctypes.c_double)))
+        fn(a.ctypes.data, out.ctypes.data)  # a and out stay referenced for the call's duration
         return out
 
 
