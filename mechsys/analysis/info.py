@@ -7,7 +7,7 @@ import numpy as np
 
 from mechsys.analysis.crosscheck import random_states
 from mechsys.errors import AnalysisError
-from mechsys.mechanics.model import MechanicalModel
+from mechsys.mechanics.model import INTERNAL_METHOD, MechanicalModel
 from mechsys.numeric.lambdify import compile_matrix
 
 
@@ -81,7 +81,7 @@ def system_info(model: MechanicalModel) -> Info:
     hol_rank = max(_rank(A_fn(t, q, u, p)[hol, :]) for t, q, u in states) if hol else 0
     nfree = len(model.q)
     dof = nfree - rank
-    eq = model.equations("lagrange")
+    eq = model.equations(INTERNAL_METHOD)
     M_fn = compile_matrix(eq.M, model.t, model.q, model.u, params)
     massless = []
     notes = []

@@ -17,6 +17,7 @@ if TYPE_CHECKING:  # sympy and the model are imported only where used: a warm ru
 METHODS = ("auto", "native", "CVODE", "RK45", "DOP853", "Radau", "BDF", "LSODA")
 EVALUATIONS_PER_STEP = 20  # the scipy and CVODE paths count the step budget in right-hand-side evaluations
 RESIDUAL_TOLERANCE = 1e-6  # a projected state must satisfy the constraints to 1e-6 x (1 + max |q|, |q'|)
+PROJECTION_STEPS = 20  # native steps (of the size reached) between two projections onto the constraints
 BUDGET_WINDOW = 10_000  # RHS evaluations between two checks of the pace of a scipy or CVODE run against its budget
 SLOW_WINDOWS = 3  # consecutive windows whose pace would overspend the budget before a run is stopped (a transient
 # that starts slowly, like the initial layer of a stiff scene at a tight tolerance, speeds up within one or two)
@@ -436,28 +437,44 @@ def native_integrator(model: MechanicalModel, c: Compiled, required: bool):
 
 def native_projected(nat, c: Compiled, p: np.ndarray, grid: np.ndarray, y0: np.ndarray, rtol: float, atol: float,
                       progress, max_steps: float) -> tuple:
-    """Closed loops on the compiled loop: one native solve per output interval, projection onto the constraints in
-    between; each interval starts with the step size the previous one reached. Returns (Y, RHS calls, steps), or (None, calls, t) when
-    the augmented matrix is singular at t."""
+    """Closed loops and drives on the compiled loop: native solves with dense output between projections onto the
+    constraints. A solve spans as many output intervals as about PROJECTION_STEPS steps of the size reached cover
+    (at least one), so the step is set by the tolerance, not by the output grid (one solve per output interval
+    took a step per output: 2,500 steps for the indicator at --dt 0.01 instead of 650); the outputs inside a solve
+    are its dense output, the last one is projected, and the next solve continues with the step size reached. A
+    solve whose dense outputs leave the constraints by more than max(rtol, atol) is repeated over half the steps
+    (down to one output interval, projected at its end as before). Returns (Y, RHS calls, steps), or (None, calls, t) when the augmented matrix is singular at t."""
     n = c.n
     ys, calls, steps = [y0], 0, 0
     y, h = y0, 0.0
-    for k, (a, b) in enumerate(zip(grid[:-1], grid[1:])):
-        run = nat.run(p, y, np.array([a, b]), rtol, atol, max_steps=max_steps - steps, h0=h)
-        h = run.h_next  # the next interval continues with the step size reached (no new initial-step search)
+    k, last = 0, len(grid) - 1
+    # steps per solve: halved (for the rest of the run) when the constraints drift beyond the tolerance inside a
+    # solve; at 0 a solve spans one output interval
+    reach = PROJECTION_STEPS
+    drift_tol = max(rtol, atol)
+    while k < last:
+        # the outputs this solve reaches: those within `reach` steps of the current size
+        j = max(k + 1, min(last, int(np.searchsorted(grid, grid[k] + reach * h, side="right")) - 1))
+        run = nat.run(p, y, grid[k:j + 1], rtol, atol, max_steps=max_steps - steps, h0=h)
         calls += run.nfev
         steps += run.nsteps
         if run.status == -2:
             return None, calls, run.t_reached
         if run.status:
             raise AnalysisError(f"integration failed at t = {run.t_reached:.6g}: {run.message}"
-                                f"{singularity_note(c, p, float(a), y)}")
-        q, u = project(c, p, float(b), run.y[-1, :n], run.y[-1, n:])
-        check_on_manifold(c, p, float(b), q, u)
+                                f"{singularity_note(c, p, float(grid[k]), y)}")
+        inner = grid[k + 1:j]
+        if len(inner) and float(np.max(constraint_residual(c, p, inner, run.y[1:-1, :n], run.y[1:-1, n:]))) > drift_tol:
+            reach //= 2  # the dense outputs drifted off the constraints: solve again, shorter
+            continue
+        h = run.h_next  # the next solve continues with the step size reached (no new initial-step search)
+        q, u = project(c, p, float(grid[j]), run.y[-1, :n], run.y[-1, n:])
+        check_on_manifold(c, p, float(grid[j]), q, u)
         y = np.concatenate([q, u])
-        ys.append(y)
-        if progress is not None and k % 50 == 49:
-            progress(float(b))
+        ys += list(run.y[1:-1]) + [y]
+        if progress is not None:
+            progress(float(grid[j]))
+        k = j
     return np.array(ys), calls, steps
 
 
