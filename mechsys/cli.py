@@ -944,6 +944,29 @@ def sweep(
 
 
 @app.command()
+def codegen(
+    file: Path = typer.Argument(..., help="Model file (YAML)."),
+    target: str = typer.Option(..., "--target", "-t", help="Language of the package: c, python or matlab."),
+    output: Path = typer.Option(..., "--output", "-o", help="Directory of the package (new, empty, or a previous "
+                                                            "package, which is replaced; written atomically)."),
+    method: Method = typer.Option(Method.lagrange, "--method", "-m", help="Formulation of M and f."),
+    set_: Optional[List[str]] = SetOption,
+) -> None:
+    """Write the equations of motion as a standalone C, Python or MATLAB/Octave package (no mechsys needed)."""
+
+    def body() -> int:
+        from mechsys.codegen import check_destination, check_target, write_package
+
+        check_target(target)
+        check_destination(output)
+        files = write_package(load_model(file, set_), target, output, method.value)
+        sys.stdout.write(f"wrote {output}: {', '.join(files)}\n")
+        return 0
+
+    run(body)
+
+
+@app.command()
 def schema(output: Optional[Path] = OutputOption) -> None:
     """Print the JSON Schema of the model language (for editor completion)."""
 

@@ -30,3 +30,22 @@ def test_staged_equations_match_symbolic(name):
             scale = max(1.0, np.abs(M_ref).max(), np.abs(f_ref).max())
             assert np.allclose(M, M_ref, rtol=1e-10, atol=1e-12 * scale)
             assert np.allclose(f, f_ref, rtol=1e-10, atol=1e-12 * scale)
+
+
+def test_forward_jacobian_of_abs_and_of_an_input_named_like_a_temporary():
+    """value_and_jacobian_program: its temporaries are real (d|x|/dx is sign(x), not a Derivative that cannot be
+    printed) and never equal an input (a real coordinate named x4 was taken for the fourth temporary, and the
+    slider-crank's Jacobian column of x4 came out wrong in `mechsys codegen`)."""
+    import sympy as sp
+
+    from mechsys.numeric.lambdify import function_from_source, value_and_jacobian_sources
+
+    q, x4 = sp.symbols("q x4", real=True)
+    exprs = [sp.Abs(q) * sp.sin(x4) + sp.cos(q * x4) ** 2, sp.sin(q * x4) + x4 * sp.cos(q * x4) ** 2 + sp.sin(x4)]
+    _values, source = value_and_jacobian_sources(exprs, [q, x4], [q, x4])
+    fn = function_from_source(source)
+    jac = sp.Matrix(exprs).jacobian([q, x4])
+    for point in ((0.7, -1.3), (-0.4, 2.2)):
+        out = fn(*point)
+        want = [float(e.subs({q: point[0], x4: point[1]})) for e in jac]
+        assert out[2:] == pytest.approx(want, rel=1e-12, abs=1e-12)

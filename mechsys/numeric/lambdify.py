@@ -71,7 +71,10 @@ def value_and_jacobian_program(exprs: Sequence[sp.Expr], args: Sequence[sp.Symbo
     default). Derivatives of subexpressions are generated on demand, so those only the undifferentiated outputs
     use cost nothing."""
     exprs = [sp.sympify(e) for e in exprs]
-    replacements, reduced = sp.cse(exprs, order="none")
+    # real temporaries, as every input is: abs(x) then differentiates to sign(x), not to re/im/Derivative terms;
+    # none equal to an input (a real coordinate named x4 is the symbol x4 with real=True)
+    taken = set().union(*(e.free_symbols for e in exprs), args, wrt)
+    replacements, reduced = sp.cse(exprs, symbols=sp.numbered_symbols("x", real=True, exclude=taken), order="none")
     column = {w: j for j, w in enumerate(wrt)}
     deriv: dict[sp.Symbol, dict[int, sp.Expr]] = {w: {j: sp.Integer(1)} for w, j in column.items()}
     program = ForwardProgram(list(args), [], [], {}, list(reduced), [])
@@ -113,7 +116,7 @@ def value_and_jacobian_program(exprs: Sequence[sp.Expr], args: Sequence[sp.Symbo
         if parts:
             own = {}
             for j, e in parts.items():
-                d = sp.Symbol(f"_d{k}_{j}")
+                d = sp.Dummy(f"d{k}_{j}", real=True)  # never equal to an input
                 program.symbols[f"d{k}_{j}"] = d
                 program.derivatives.append((f"d{k}_{j}", e))
                 own[j] = d
