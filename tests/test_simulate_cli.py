@@ -60,3 +60,17 @@ def test_bench_table_has_every_method_and_tolerance():
     assert lines[0].startswith("method,rtol") and len(lines) == 5
     errors = {(ln.split(",")[0], ln.split(",")[1]): float(ln.split(",")[4]) for ln in lines[1:]}
     assert errors[("DOP853", "1e-09")] < errors[("DOP853", "1e-06")] < 1e-4
+
+
+def test_bench_takes_the_output_interval():
+    """Issue 13: `bench` had no --dt (the default interval t_end/1000 bounded the step of closed loops on scipy,
+    and the work-precision table of Andrews' mechanism was flat). A coarse grid makes scipy's closed-loop run take
+    fewer evaluations; the interval is validated like simulate's."""
+    args = ("bench", ROOT / "systems" / "four_bar.yaml", "--t-end", 1.0, "--methods", "DOP853", "--rtols", "1e-6",
+            "-f", "csv")
+    fine, coarse = invoke(*args), invoke(*args, "--dt", 0.1)
+    assert fine.exit_code == coarse.exit_code == 0, fine.output + coarse.output
+    calls = [int(r.stdout.strip().splitlines()[1].split(",")[3]) for r in (fine, coarse)]
+    assert calls[1] < calls[0] / 5
+    bad = invoke(*args, "--dt", 0)
+    assert bad.exit_code == 2 and "--dt" in bad.output
