@@ -214,8 +214,14 @@ def steady_linearization_tables(lin, label: str, independent: list[str] | None, 
             t.notes.append(f"structural zero eigenvalues reported apart: {lin.structural_text()}")
         tables.append(t)
         n = len(lin.coordinates)
-        B = np.vstack([np.zeros((n, len(speeds))), np.linalg.inv(lin.M)])
-        tables.append(matrix_table(f"{label}: B (generalized forces along the independent speeds)", speeds, B, states))
+        try:
+            B = np.vstack([np.zeros((n, len(speeds))), np.linalg.inv(lin.M)])
+            tables.append(matrix_table(f"{label}: B (generalized forces along the independent speeds)", speeds, B,
+                                       states))
+        except np.linalg.LinAlgError:  # e.g. a disk spinning about its lean axis: a speed that carries no inertia
+            t.notes.append("B is not listed: the reduced mass matrix M is singular at this steady motion (an "
+                           "independent speed carries no inertia), so generalized forces do not determine the "
+                           "accelerations")
     if hurwitz:
         tables += hurwitz_tables(None, label, lin.deflated)
     return tables
