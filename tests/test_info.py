@@ -54,6 +54,32 @@ def test_classes_of_textbook_systems():
     assert cen.cyclic == ["alpha"] and cen.system_class == "holonomic, scleronomic, autonomous"
 
 
+CARTS = """name: two_carts
+parameters: {m: 1, L: 0.5}
+coordinates:
+  x1: {initial: 0, rate: 0}
+  x2: {initial: 0.5, rate: 0}
+links:
+  cart1: {particle: true, mass: m, joint: {type: prismatic, parent: ground, axis: x, coordinate: x1}}
+  cart2: {particle: true, mass: m, joint: {type: prismatic, parent: ground, axis: x, coordinate: x2}}
+"""
+
+
+def test_a_coordinate_in_a_holonomic_constraint_is_not_cyclic(tmp_path):
+    """Two free carts on a line are each cyclic (T = m(x1'^2 + x2'^2)/2 only); a rod x2 - x1 = L between them
+    enters the velocity rows only through constant coefficients (A = [-1, 1]), yet shifting x1 alone breaks it,
+    so neither is cyclic any more. Before the fix the slider-crank's x4 was reported cyclic the same way."""
+    free, rod = tmp_path / "free.yaml", tmp_path / "rod.yaml"
+    free.write_text(CARTS)
+    rod.write_text(CARTS + "constraints:\n  - {type: holonomic, name: rod, expression: x2 - x1 - L}\n")
+    assert system_info(mechsys.load(free)).cyclic == ["x1", "x2"]
+    assert system_info(mechsys.load(rod)).cyclic == []
+    for name in ("slider_crank", "four_bar"):
+        assert system_info(mechsys.load(ROOT / "systems" / f"{name}.yaml")).cyclic == []
+    driven = system_info(mechsys.load(ROOT / "docs" / "examples" / "slider_crank_driven.yaml"))
+    assert driven.cyclic == []
+
+
 def test_redundant_constraint_is_detected(tmp_path):
     text = (ROOT / "systems" / "centrifuge.yaml").read_text()
     text += "constraints:\n  - {type: holonomic, expression: beta - 0.1}\n  - {type: holonomic, expression: 2*beta - 0.2}\n"

@@ -30,14 +30,16 @@ class CyclicDecision:
 
 
 def decide(model) -> CyclicDecision:
-    """The cyclic coordinates of ``model``: the equations of motion (M, f and the constraint rows A, b) do not
-    depend on them. Decided at the file's parameter values with every nonzero value varied randomly (a generic
+    """The cyclic coordinates of ``model``: the equations of motion (M, f, the constraint rows A, b and the
+    holonomic constraints Phi themselves) do not depend on them. Phi matters: a slider closing a loop enters the
+    velocity rows only through constant coefficients, yet shifting it alone opens the loop. Decided at the file's parameter values with every nonzero value varied randomly (a generic
     point), so the answer does not hinge on a coincidence of values; a file's `cyclic: true` is checked at the
     file's own values instead (a symmetry that holds only there, e.g. a zero eccentricity)."""
     from mechsys.mechanics.model import INTERNAL_METHOD
 
     eq = model.equations(INTERNAL_METHOD)
-    parts = [sp.Matrix(m) for m in (eq.M, eq.f, eq.A, eq.b) if m.shape[0] and m.shape[1]]
+    parts = [sp.Matrix(m) for m in (eq.M, eq.f, eq.A, eq.b, model.holonomic_constraints)
+             if m.shape[0] and m.shape[1]]
     declared = {name: c.cyclic for name, c in model.doc.spec.coordinates.items()
                 if c.cyclic is not None and name in model.coordinates}
     present: set = set()
