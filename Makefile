@@ -4,12 +4,12 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: install demo test test-fast check bench clean
+.PHONY: install demo test test-fast check bench docs clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e ".[dev]"
+	$(BIN)/python -m pip install --quiet -e ".[dev,docs]"
 	touch $(STAMP)
 
 install: $(STAMP)
@@ -44,5 +44,11 @@ bench: $(STAMP)
 	$(BIN)/mechsys bench systems/four_bar.yaml --t-end 2 --methods native,DOP853,Radau
 	$(BIN)/mechsys bench systems/centrifuge.yaml --t-end 20
 
+## docs: the gallery figures from the bundled models, then the MkDocs site in site/ (--strict: a warning or a broken
+## link fails); tests/test_docs_examples.py checks every example of the pages
+docs: $(STAMP)
+	$(BIN)/python docs/hooks/gallery.py $(BIN)/mechsys
+	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict
+
 clean:
-	rm -rf $(VENV) .pytest_cache .hypothesis build *.egg-info
+	rm -rf $(VENV) .pytest_cache .hypothesis build site *.egg-info
