@@ -238,17 +238,12 @@ def wrenches(model: MechanicalModel, t: float, q: np.ndarray, u: np.ndarray, a: 
 def reaction_columns(model: MechanicalModel, result: SimulationResult, p: np.ndarray) -> dict[str, np.ndarray]:
     """``reaction(LINK).Fx`` ... ``.Mz`` at every output time of a simulation ``result`` (a SimulationResult of
     this model with parameter vector ``p``): the wrench the parent (or ground) exerts on the link's subtree."""
-    from mechsys.analysis.simulate import RightHandSide, compile_model
+    from mechsys.analysis.outputs import accelerations_along
 
-    c = compile_model(model)
-    rhs = RightHandSide(c, np.asarray(p, float))
-    captured = [(im["t"], c.gap_names.index(im["contact"])) for im in result.impacts
-                if im.get("captured") and im["contact"] in c.gap_names]
     names = column_names(model)
     data = np.zeros((len(result.t), len(names)))
-    for i, (t, q, u) in enumerate(zip(result.t, result.q, result.u)):
-        rhs.persistent = sorted({k for tc, k in captured if tc <= t})  # resting contacts hold as in the run
-        a, lam = rhs.accelerations(float(t), q, u)
+    for i, (t, q, u, (a, lam)) in enumerate(zip(result.t, result.q, result.u,
+                                                accelerations_along(model, result, p))):
         w = wrenches(model, float(t), q, u, a, lam, p)
         data[i] = np.concatenate([w[j.link] for j in model.kin.joints])
     return {name: data[:, k] for k, name in enumerate(names)}

@@ -160,6 +160,7 @@ class SimulationResult:
     driving: dict = field(default_factory=dict)  # prescribed coordinate -> driving force/torque at each output
     events: list[dict] = field(default_factory=list)  # {"t", "event", "state": {...}} in time order
     impacts: list[dict] = field(default_factory=list)  # {"t", "contact", "impulse", "rates_before", ...}
+    outputs: dict = field(default_factory=dict)  # the file's `outputs:` column -> values (analysis/outputs.py)
 
     @property
     def E(self) -> np.ndarray:
@@ -173,9 +174,9 @@ class SimulationResult:
 
     def columns(self) -> tuple[list[str], np.ndarray]:
         names = ["t", *self.coordinates, *[f"der({c})" for c in self.coordinates], "T", "V", "E", "residual"]
-        names += [f"driving({c})" for c in self.driving]
+        names += [f"driving({c})" for c in self.driving] + list(self.outputs)
         data = np.column_stack([self.t, self.q, self.u, self.T, self.V, self.E, self.residual,
-                                *self.driving.values()])
+                                *self.driving.values(), *self.outputs.values()])
         return names, data
 
 

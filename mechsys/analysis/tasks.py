@@ -68,9 +68,10 @@ def _modes(model: MechanicalModel, options: dict) -> Outputs:
 
 def _simulate(model: MechanicalModel, options: dict) -> Outputs:
     from mechsys.analysis.charted import simulate_charted
+    from mechsys.analysis.outputs import add_outputs
 
     t_end = float(options.get("t_end", 10.0))
-    r = simulate_charted(model, t_end, options.get("dt"), options.get("method", "auto"))
+    r = add_outputs(model, simulate_charted(model, t_end, options.get("dt"), options.get("method", "auto")))
     out: Outputs = {"t_end": float(r.t[-1]), "energy_drift": r.energy_drift,
                     "max_residual": float(np.max(r.residual)), "rhs_evaluations": r.rhs_evaluations,
                     "events": len(r.events)}
@@ -81,6 +82,9 @@ def _simulate(model: MechanicalModel, options: dict) -> Outputs:
         out[f"min.{c}"] = float(np.min(r.q[:, k]))
     for name, values in r.driving.items():
         out[f"driving({name})"] = float(values[-1])
+    for name, values in r.outputs.items():  # the file's outputs: final, largest and smallest value
+        out[f"final.{name}"], out[f"max.{name}"], out[f"min.{name}"] = (float(values[-1]), float(np.max(values)),
+                                                                        float(np.min(values)))
     return out
 
 

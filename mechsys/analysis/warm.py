@@ -151,6 +151,17 @@ def remember(path: Path, overrides: Sequence[str], model, result: SimulationResu
                       "warnings": [w for w in result.warnings if not w.startswith(("auto method", *NOTES))]})
 
 
+def declares_outputs(path: Path) -> bool:
+    """Whether the file has a non-empty `outputs:` section (read as plain YAML; validation comes with the load)."""
+    import yaml
+
+    try:
+        data = yaml.safe_load(Path(path).read_text())
+    except (OSError, yaml.YAMLError, UnicodeDecodeError):
+        return False  # the load reports it
+    return isinstance(data, dict) and bool(data.get("outputs"))
+
+
 def simulate_file(path: Path, overrides: Sequence[str], t_end: float, dt: Optional[float], method: str,
                   rtol: float, atol: float, capture_velocity: float = 1e-10, max_steps: float = 1e6,
                   progress: Optional[Callable[[float], None]] = None, need_model: bool = False) -> tuple:
@@ -160,8 +171,10 @@ def simulate_file(path: Path, overrides: Sequence[str], t_end: float, dt: Option
     simulated (through gimbal locks: analysis/charted.py), and its plan remembered. The timings gain "load":
     everything not derivation or integration."""
     from mechsys.analysis.charted import simulate_charted
+    from mechsys.analysis.outputs import add_outputs
 
     t0 = time.perf_counter()
+    need_model = need_model or declares_outputs(path)  # outputs are evaluated on the model
     result = None if need_model else run_planned(path, overrides, t_end, dt, method, rtol, atol, progress,
                                                  max_steps)
     model = None
@@ -172,6 +185,7 @@ def simulate_file(path: Path, overrides: Sequence[str], t_end: float, dt: Option
         model = mechsys.load(path, parse_assignments(list(overrides)), release_prescribed=True)
         result = simulate_charted(model, t_end, dt, method, rtol, atol, capture_velocity=capture_velocity,
                                   progress=progress, max_steps=max_steps)
+        add_outputs(model, result)
         remember(path, overrides, model, result)
     result.timings = {"load": time.perf_counter() - t0 - sum(result.timings.values()), **result.timings}
     return result, model

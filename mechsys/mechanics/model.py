@@ -59,6 +59,7 @@ class MechanicalModel:
         self.t = TIME
         self._eqs: dict[str, Equations] = {}
         self.events  # parse now: a bad expression is an input error at load time
+        self.outputs
 
     def with_overrides(self, values: dict[str, float]) -> "MechanicalModel":
         """The same symbolic model (derivations and compiled code shared) with other numeric parameter values,
@@ -312,6 +313,13 @@ class MechanicalModel:
             expr = self.doc.parse(ev.expression, ("events", i, "expression"), "force")
             out.append((ev.name, expr, ev.direction, ev.action))
         return out
+
+    @cached_property
+    def outputs(self) -> list[tuple[str, sp.Expr]]:
+        """(column, expression in t, q, der(q), der(der(q))) of the file's `outputs:` (mechanics/quantities.py)."""
+        from mechsys.mechanics.quantities import parse_outputs
+
+        return parse_outputs(self)
 
     # ------------------------------------------------------------------------------------- classification
     @property

@@ -6,11 +6,11 @@ import math
 import re
 from dataclasses import dataclass
 from fractions import Fraction
-from typing import Callable, Mapping
+from typing import Callable, Mapping, Protocol
 
 import sympy as sp
 
-__all__ = ["ExpressionError", "parse_expression", "FUNCTIONS", "CONSTANTS", "RESERVED", "names_in"]
+__all__ = ["ExpressionError", "parse_expression", "FUNCTIONS", "CONSTANTS", "RESERVED", "names_in", "Quantities"]
 
 
 class ExpressionError(ValueError):
@@ -48,7 +48,7 @@ RESERVED = frozenset(FUNCTIONS) | frozenset(CONSTANTS) | {"t", "der"}
 
 _TOKEN = re.compile(
     r"\s*(?:(?P<num>(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?)|(?P<name>[A-Za-z_][A-Za-z_0-9]*)"
-    r"|(?P<op>\*\*|[-+*/^(),]))"
+    r"|(?P<op>\*\*|[-+*/^(),.]))"
 )
 _MAX_LENGTH = 4000
 #: Nesting levels: parentheses, function arguments, unary signs and exponents each count one.
@@ -66,7 +66,9 @@ class _Tok:
     pos: int
 
 
-def _tokenize(text: str) -> list[_Tok]:
+def _tokenize(text: str, dots: bool = False) -> list[_Tok]:
+    """The tokens of ``text``; a '.' outside a number is a token only where ``dots`` (references to points and
+    components in output quantities), an unexpected character everywhere else."""
     toks: list[_Tok] = []
     pos = 0
     n = len(text)
@@ -79,6 +81,8 @@ def _tokenize(text: str) -> list[_Tok]:
             raise ExpressionError(f"unexpected character {text[bad]!r} in expression", bad)
         kind = m.lastgroup or "op"
         start = m.start(kind)
+        if kind == "op" and m.group(kind) == "." and not dots:
+            raise ExpressionError("unexpected character '.' in expression", start)
         toks.append(_Tok(kind, m.group(kind), start))
         pos = m.end()
     toks.append(_Tok("end", "", n))
@@ -102,12 +106,14 @@ def _number(text: str, pos: int = 0) -> sp.Expr:
 class _Parser:
     """Pratt parser over the token list. Grammar: sums, products, unary minus, right-assoc powers."""
 
-    def __init__(self, text: str, symbols: Mapping[str, sp.Expr], rates: Mapping[str, sp.Expr] | None):
+    def __init__(self, text: str, symbols: Mapping[str, sp.Expr], rates: Mapping[str, sp.Expr] | None,
+                 quantities: "Quantities | None" = None):
         self.text = text
-        self.toks = _tokenize(text)
+        self.toks = _tokenize(text, dots=quantities is not None)
         self.i = 0
         self.symbols = symbols
         self.rates = rates
+        self.quantities = quantities
         self.depth = 0
 
     def peek(self) -> _Tok:
@@ -228,7 +234,12 @@ class _Parser:
         return f"unknown name {name!r}{hint}"
 
     def call(self, tok: _Tok) -> sp.Expr:
+        start = self.i - 1  # the index of the function name
         self.expect("(")
+        if tok.text == "der" and self.quantities is not None and self.peek().text == "der":
+            return self.second_derivative(tok)
+        if self.quantities is not None and (tok.text in self.quantities.functions or tok.text == "norm"):
+            return self.quantity(tok, start)
         if tok.text == "der":
             arg = self.take()
             if self.rates is None:
@@ -265,6 +276,88 @@ class _Parser:
             if big:
                 raise ExpressionError(f"number too large: {tok.text}() of more than 700", tok.pos)
         return fn(*args)
+
+
+    def second_derivative(self, tok: _Tok) -> sp.Expr:
+        """der(der(NAME)): the coordinate's acceleration (output quantities only)."""
+        inner = self.take()
+        self.expect("(")
+        arg = self.take()
+        if arg.kind != "name" or arg.text not in self.quantities.accels:
+            raise ExpressionError(f"der(der()) takes a coordinate name{self.hint(arg, self.quantities.accels)}",
+                                  arg.pos)
+        self.expect(")")
+        self.expect(")")
+        return self.quantities.accels[arg.text]
+
+    @staticmethod
+    def hint(arg: _Tok, options: Mapping) -> str:
+        close = difflib.get_close_matches(arg.text, list(options), n=1) if arg.kind == "name" else []
+        return f" (did you mean {close[0]!r}?)" if close else ""
+
+    def quantity(self, tok: _Tok, start: int) -> sp.Expr:
+        """A built-in quantity FUNCTION(REF, ...): a scalar, or a vector that must be followed by a component
+        (.x, .y, .z), be the argument of norm(), or be the whole expression (one column per component)."""
+        if tok.text == "norm":
+            inner = self.take()
+            if inner.kind != "name" or inner.text not in self.quantities.functions or self.peek().text != "(":
+                raise ExpressionError("norm() takes a vector quantity, e.g. norm(angular_momentum(system))",
+                                      inner.pos)
+            self.take()
+            value = self.quantity_value(inner)
+            self.expect(")")
+            if not isinstance(value, sp.MatrixBase):
+                raise ExpressionError(f"norm() takes a vector quantity; {inner.text}() is a scalar", inner.pos)
+            return sp.sqrt(sum(e**2 for e in value))
+        value = self.quantity_value(tok)
+        if not isinstance(value, sp.MatrixBase):
+            return value
+        if self.peek().text == ".":
+            self.take()
+            comp = self.take()
+            names = self.quantities.components(tok.text)
+            if comp.text not in names:
+                raise ExpressionError(f"{tok.text}() has the components {', '.join(names)}", comp.pos)
+            return value[names.index(comp.text)]
+        if start == 0 and self.peek().kind == "end":
+            return value  # the whole expression: one column per component
+        raise ExpressionError(f"{tok.text}() is a vector: take a component ({tok.text}(...).x) or its norm "
+                              f"(norm({tok.text}(...)))", tok.pos)
+
+    def quantity_value(self, tok: _Tok) -> sp.Expr | sp.MatrixBase:
+        """The arguments (references such as crank, crank.A, system, x4) up to the closing parenthesis."""
+        refs: list[tuple[str, int]] = []
+        while True:
+            first = self.take()
+            if first.kind != "name":
+                raise ExpressionError(f"{tok.text}() takes names of links, points or coordinates", first.pos)
+            text = first.text
+            while self.peek().text == ".":
+                self.take()
+                part = self.take()
+                if part.kind != "name":
+                    raise ExpressionError("expected a point name after '.'", part.pos)
+                text += "." + part.text
+            refs.append((text, first.pos))
+            if self.peek().text != ",":
+                break
+            self.take()
+        self.expect(")")
+        return self.quantities.evaluate(tok.text, refs, tok.pos)
+
+
+class Quantities(Protocol):
+    """What an expression of output quantities may call (mechanics/quantities.py provides it): ``functions``
+    are the built-in names, ``evaluate(name, [(ref, column)], column)`` returns a scalar or a 3-vector (or raises
+    ExpressionError), ``components(name)`` names a vector's components and ``accels`` maps coordinates to
+    their acceleration symbols (for der(der(NAME)))."""
+
+    functions: frozenset
+    accels: Mapping[str, sp.Expr]
+
+    def evaluate(self, name: str, refs: list[tuple[str, int]], pos: int) -> sp.Expr | sp.MatrixBase: ...
+
+    def components(self, name: str) -> tuple[str, ...]: ...
 
 
 def _digits(n: int) -> float:
@@ -365,12 +458,15 @@ def parse_expression(
     text: str | int | float,
     symbols: Mapping[str, sp.Expr],
     rates: Mapping[str, sp.Expr] | None = None,
+    quantities: Quantities | None = None,
 ) -> sp.Expr:
     """Parse ``text`` into a sympy expression.
 
     ``symbols`` maps each name the context allows (parameters, coordinates, ``t``) to its sympy value;
     ``rates`` maps coordinate names to their rate symbols and enables ``der(name)``. Anything else is an
-    :class:`ExpressionError`; nothing in the string is ever executed.
+    :class:`ExpressionError`; nothing in the string is ever executed. ``quantities`` enables the built-in
+    quantity functions of the file's `outputs:` (position(crank.A), norm(angular_momentum(system)), ...); only
+    then may the result be a 3-vector (a bare vector quantity as the whole expression).
     """
     if isinstance(text, bool):
         raise ExpressionError("expected a number or an expression, got a boolean")
@@ -386,7 +482,7 @@ def parse_expression(
         raise ExpressionError(f"expected a number or an expression, got {type(text).__name__}")
     if len(text) > _MAX_LENGTH:
         raise ExpressionError(f"expression longer than {_MAX_LENGTH} characters")
-    return _Parser(text, symbols, rates).parse()
+    return _Parser(text, symbols, rates, quantities).parse()
 
 
 def names_in(text: str | int | float) -> set[str]:

@@ -11,7 +11,7 @@ import pydantic
 import sympy as sp
 
 from mechsys.errors import InputError
-from mechsys.model.expressions import RESERVED, ExpressionError, names_in, parse_expression
+from mechsys.model.expressions import RESERVED, ExpressionError, Quantities, names_in, parse_expression
 from mechsys.model.files import read_model_text
 from mechsys.model.schema import System
 from mechsys.model.yamlpos import Path, PositionMap, dotted, load_yaml
@@ -56,9 +56,11 @@ class Document:
         return InputError(message, self.file, line, col, dotted(path))
 
     # ------------------------------------------------------------------------------------- parsing
-    def parse(self, value: Any, path: Path, kind: str = "kinematic", extra: dict | None = None) -> sp.Expr:
+    def parse(self, value: Any, path: Path, kind: str = "kinematic", extra: dict | None = None,
+              quantities: Quantities | None = None) -> sp.Expr:
         """Parse an expression at ``path``. ``kind``: 'parameter' (parameters only), 'initial' (parameters),
-        'prescribed' (parameters and t), 'kinematic' (+ coordinates), 'force' (+ rates)."""
+        'prescribed' (parameters and t), 'kinematic' (+ coordinates), 'force' (+ rates); ``quantities``: the
+        built-in functions of `outputs:` (mechanics/quantities.py)."""
         # parameters only: the mapping itself (no copy per call, which made N parameters cost N**2)
         symbols: Mapping[str, sp.Expr] = self.parameters
         if kind in ("prescribed", "kinematic", "force") or extra:
@@ -75,7 +77,7 @@ class Document:
         if extra:
             symbols.update(extra)  # a copy: see above
         try:
-            return parse_expression(value, symbols, rates)
+            return parse_expression(value, symbols, rates, quantities)
         except ExpressionError as exc:
             if path in self.overridden:
                 raise InputError(f"--set {_shorten(self.overridden[path])}: {exc.message}") from None

@@ -427,6 +427,11 @@ class System(Strict):
     forces: list[ForceSpec] = Field(default_factory=list)
     events: list[Event] = Field(default_factory=list)
     contacts: list[Contact] = Field(default_factory=list)
+    outputs: dict[Name, Expr] = Field(default_factory=dict, description="named output quantities: expressions "
+                                      "of t, coordinates, der(q), der(der(q)), parameters and the built-in "
+                                      "quantities position(P), velocity(P), acceleration(P), angular_velocity(L), "
+                                      "momentum(L|system), angular_momentum(L|system[, P]), kinetic_energy(L|system), "
+                                      "momentum_of(q); columns of simulate results (docs/outputs.md)")
     expect: list[Expectation] = Field(default_factory=list)
 
     @field_validator("coordinates", mode="before")

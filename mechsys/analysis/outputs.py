@@ -1,0 +1,56 @@
+"""The file's `outputs:` evaluated along a motion: one column per output (accelerations from the equations)."""
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+if TYPE_CHECKING:  # not at run time: the warm path of `simulate` imports this module without sympy
+    from mechsys.analysis.simulate import SimulationResult
+    from mechsys.mechanics.model import MechanicalModel
+
+
+def add_outputs(model: MechanicalModel, result: SimulationResult) -> SimulationResult:
+    """``result`` with the file's outputs (at the model's parameter values) as ``result.outputs``."""
+    import time
+
+    from mechsys.analysis.equilibria import parameter_values
+
+    if model.outputs:
+        t0 = time.perf_counter()
+        result.outputs = output_columns(model, result, parameter_values(model))
+        result.timings["outputs"] = time.perf_counter() - t0
+    return result
+
+
+def output_columns(model: MechanicalModel, result: SimulationResult, p: np.ndarray) -> dict[str, np.ndarray]:
+    """Each output of ``model`` at every output time of ``result`` (a simulation of this model with parameter
+    vector ``p``). An output with accelerations (acceleration(P), der(der(q))) takes q'' from the equations of
+    motion at each time, with the resting contacts of the run held as in the run."""
+    from mechsys.numeric.lambdify import compile_exprs
+
+    if not model.outputs:
+        return {}
+    names = [name for name, _ in model.outputs]
+    exprs = [e for _, e in model.outputs]
+    fn = compile_exprs(exprs, [model.t, *model.q, *model.u, *model.a, *model.parameter_symbols])
+    accels = [a for a, _lam in accelerations_along(model, result, p)] \
+        if any(set(model.a) & e.free_symbols for e in exprs) else np.zeros_like(result.u)
+    p = np.asarray(p, float)
+    data = np.array([fn(float(t), *q, *u, *a, *p) for t, q, u, a in zip(result.t, result.q, result.u, accels)],
+                    dtype=float).reshape(len(result.t), len(names))
+    return {name: data[:, k] for k, name in enumerate(names)}
+
+
+def accelerations_along(model: MechanicalModel, result: SimulationResult, p: np.ndarray):
+    """(q'', multipliers) from the equations of motion at each output time of ``result``, the resting contacts
+    of the run (captured impacts) held as in the run."""
+    from mechsys.analysis.simulate import RightHandSide, compile_model
+
+    c = compile_model(model)
+    rhs = RightHandSide(c, np.asarray(p, float))
+    captured = [(im["t"], c.gap_names.index(im["contact"])) for im in result.impacts
+                if im.get("captured") and im["contact"] in c.gap_names]
+    for t, q, u in zip(result.t, result.q, result.u):
+        rhs.persistent = sorted({k for tc, k in captured if tc <= t})
+        yield rhs.accelerations(float(t), q, u)

@@ -1,0 +1,171 @@
+"""`outputs:` (issue 14): built-in quantities as result columns, checked against closed forms written here."""
+import csv
+import json
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import reference_nonholonomic as ref
+from mechsys.cli import main as cli_main
+
+ROOT = Path(__file__).resolve().parents[1]
+FLIP = """name: flip
+description: Dzhanibekov flip, a torque-free body spun about its intermediate axis (y)
+parameters: {Ix: 1.0, Iy: 2.0, Iz: 3.0, w: 2.0, eps: 0.01}
+coordinates:
+  psi: {initial: 0, rate: eps}
+  theta: {initial: 0, rate: 0}
+  phi: {initial: 0, rate: w}
+links:
+  body:
+    joint: {type: spherical, parent: ground, sequence: zxy, coordinates: [psi, theta, phi]}
+    mass: 1
+    inertia: {xx: Ix, yy: Iy, zz: Iz}
+    points: {tip: [0, 1, 0]}
+outputs:
+  H: angular_momentum(body)
+  H_norm: norm(angular_momentum(system))
+  T2: 2*kinetic_energy(body)
+  tip_y: position(body.tip).y
+"""
+
+
+def run(*args: str) -> int:
+    """`mechsys ARGS` in this process (as a user runs it): the exit code."""
+    saved, sys.argv = sys.argv, ["mechsys", *args]
+    try:
+        cli_main()
+        return 0
+    except SystemExit as exc:
+        return int(exc.code or 0)
+    finally:
+        sys.argv = saved
+
+
+def table(path: Path) -> dict[str, np.ndarray]:
+    rows = list(csv.reader(path.open()))
+    data = np.array(rows[1:], dtype=float)
+    return {name: data[:, k] for k, name in enumerate(rows[0])}
+
+
+def simulate(tmp_path: Path, text: str, *options: str) -> dict[str, np.ndarray]:
+    model, out = tmp_path / "model.yaml", tmp_path / "out.csv"
+    model.write_text(text)
+    assert run("simulate", str(model), "-o", str(out), *options) == 0
+    return table(out)
+
+
+def test_a_dzhanibekov_flip_conserves_the_angular_momentum_vector_and_the_energy(tmp_path):
+    """Torque-free: H (ground axes) and T are constant through the flip; at t = 0 the body axes are the ground
+    axes, so H = (Ix w_x, Iy w_y, Iz w_z) = (0, Iy w, Iz eps) and 2T = Iy w^2 + Iz eps^2. The spin axis (body y)
+    turns over: the tip at body (0, 1, 0) goes from y = 1 to near y = -1 and back."""
+    c = simulate(tmp_path, FLIP, "--t-end", "20", "--rtol", "1e-12", "--atol", "1e-14")
+    H0 = np.array([0.0, 2.0 * 2.0, 3.0 * 0.01])
+    for k, axis in enumerate("xyz"):
+        assert np.max(np.abs(c[f"H.{axis}"] - H0[k])) < 1e-10 * np.linalg.norm(H0)
+    assert np.max(np.abs(c["H_norm"] - np.linalg.norm(H0))) < 1e-10 * np.linalg.norm(H0)
+    assert np.max(np.abs(c["T2"] - (2.0 * 4 + 3.0 * 1e-4))) < 1e-10 * 8
+    assert np.allclose(c["T2"], 2 * c["T"], rtol=1e-13, atol=0)
+    assert c["tip_y"][0] == pytest.approx(1.0) and c["tip_y"].min() < -0.99
+
+
+def test_the_generalized_momenta_of_a_heavy_top_are_conserved(tmp_path):
+    """Symmetric heavy top in z-x-z angles about its fixed tip (transverse moment about the tip A = A0 + m l^2,
+    axial C): p_phi = C (phi' + psi' cos theta), p_psi = A psi' sin^2 theta + p_phi cos theta; both constant while
+    theta nutates."""
+    text = (ROOT / "tests/data/beyond/top_zxz.yaml").read_text()
+    text += "outputs:\n  p_psi: momentum_of(psi)\n  p_phi: momentum_of(phi)\n"
+    c = simulate(tmp_path, text, "--t-end", "3", "--rtol", "1e-12", "--atol", "1e-14")
+    m, l, A0, C = 1.0, 0.1, 0.004, 0.008
+    A = A0 + m * l * l
+    th, psd, phd = c["theta"], c["der(psi)"], c["der(phi)"]
+    p_phi = C * (phd + psd * np.cos(th))
+    p_psi = A * psd * np.sin(th) ** 2 + p_phi * np.cos(th)
+    assert np.allclose(c["p_phi"], p_phi, rtol=1e-12, atol=0) and np.allclose(c["p_psi"], p_psi, rtol=1e-12, atol=0)
+    assert np.ptp(th) > 0.01  # it does nutate
+    for name in ("p_psi", "p_phi"):
+        assert np.ptp(c[name]) < 1e-10 * abs(c[name][0])
+
+
+def test_driven_slider_crank_accelerations_match_the_loop_closure(tmp_path):
+    """Crank turned at constant omega2: from l2 sin th2 + l3 sin th3 = 0 (l2 = 2 l2O, l3 = 2 l3A),
+    th3' = -l2 cos th2 th2' / (l3 cos th3) and th3'' = (l2 sin th2 th2'^2 + l3 sin th3 th3'^2) / (l3 cos th3);
+    the crank pin A moves on the circle of radius l2 with centripetal acceleration l2 omega2^2."""
+    text = (ROOT / "docs/examples/slider_crank_driven.yaml").read_text()
+    text += ("outputs:\n  th3dd: der(der(theta3))\n  th2dd: der(der(theta2))\n  aA: norm(acceleration(crank.A))\n"
+             "  vA: velocity(crank.A)\n")
+    c = simulate(tmp_path, text, "--t-end", "2", "--rtol", "1e-12", "--atol", "1e-14")
+    l2, l3, w = 0.2, 0.5, 3.0
+    th2, th3 = c["theta2"], c["theta3"]
+    th3d = -l2 * np.cos(th2) * w / (l3 * np.cos(th3))
+    assert np.allclose(c["der(theta3)"], th3d, rtol=0, atol=1e-9)
+    want = (l2 * np.sin(th2) * w**2 + l3 * np.sin(th3) * th3d**2) / (l3 * np.cos(th3))
+    assert np.max(np.abs(c["th3dd"] - want)) < 1e-7
+    assert np.max(np.abs(c["th2dd"])) < 1e-9
+    assert np.allclose(c["aA"], l2 * w**2, rtol=1e-8)
+    assert np.allclose(c["vA.x"], -l2 * w * np.sin(th2), atol=1e-9)
+    assert np.allclose(c["vA.y"], l2 * w * np.cos(th2), atol=1e-9)
+
+
+def test_a_rolling_disk_in_steady_turning_tracks_a_circle(tmp_path):
+    """Thin disk at lean 0.3 and spin 1/r on a steady turn (yaw rate: a root of the steady-turning condition,
+    tests/reference_nonholonomic.py): the contact point (the lean link's origin) runs on a circle of radius
+    R = r phi' / |psi'| (its speed r phi', its heading turning at psi') and is back at the start after one
+    period 2 pi / |psi'|."""
+    m, r, g, lean = 2.0, 0.3, 9.81, 0.3
+    spin = 1 / r
+    yaw = ref.steady_turning_yaw_rates(m, r, m * r * r / 2, m * r * r / 4, g, lean, spin)[1]
+    period = 2 * math.pi / abs(yaw)
+    text = (ROOT / "systems/rolling_disk.yaml").read_text()
+    text += "outputs:\n  contact: position(lean_link)\n"
+    c = simulate(tmp_path, text, "--t-end", repr(period), "--rtol", "1e-12", "--atol", "1e-14",
+                 "--set", f"lean={lean}", "--set", f"der(yaw)={yaw!r}", "--set", "der(x)=1")
+    x, y = c["contact.x"], c["contact.y"]
+    R = r * spin / abs(yaw)
+    centre = np.array([0.0, R * math.copysign(1, yaw)])  # starting at the origin heading along +x
+    assert np.allclose(np.hypot(x - centre[0], y - centre[1]), R, rtol=1e-8)
+    assert abs(x[-1]) < 1e-8 and abs(y[-1]) < 1e-8
+    assert np.allclose(c["lean"], lean, atol=1e-9)
+
+
+@pytest.mark.parametrize("expression, message", [
+    ("position(body.nose).x", "nose"),
+    ("2*angular_momentum(body)", "angular_momentum() is a vector"),
+    ("norm(kinetic_energy(body))", "kinetic_energy() is a scalar"),
+    ("momentum_of(omega)", "momentum_of() takes a free coordinate"),
+    ("position(body.tip).w", "components x, y, z"),
+    ("velocity(body.tip, body)", "takes 1 argument"),
+    ("der(der(chi))", "der(der()) takes a coordinate name"),
+])
+def test_a_bad_output_is_one_line_naming_file_line_and_key(tmp_path, capsys, expression, message):
+    model = tmp_path / "bad.yaml"
+    model.write_text(FLIP.replace("tip_y: position(body.tip).y", f"bad: {expression}"))
+    assert run("info", str(model)) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "Traceback" not in err
+    assert f"{model}:" in err and "outputs.bad" in err and message in err
+
+
+def test_outputs_feed_check_expectations(tmp_path, capsys):
+    """`expect:` reads final/max/min of an output: the flip's |H| at the end equals its initial value."""
+    text = FLIP + """expect:
+  - name: "|H| conserved"
+    analysis: simulate
+    options: {t_end: 5}
+    output: final.H_norm
+    value: 4.00011249841801
+    tolerance: 1.0e-8
+  - name: "the tip turns over"
+    analysis: simulate
+    options: {t_end: 20}
+    output: min.tip_y
+    max: -0.99
+"""
+    model = tmp_path / "flip.yaml"
+    model.write_text(text)
+    assert run("check", str(model), "-f", "json") == 0
+    report = json.loads(capsys.readouterr().out)
+    assert (report["passed"], report["failed"], report["errors"]) == (2, 0, 0), report
