@@ -771,6 +771,34 @@ def collide(
 
 
 @app.command()
+def inverse(
+    file: Path = typer.Argument(..., help="Model file (YAML)."),
+    at: float = typer.Option(0.0, "--at", help="Time t of the instant [s] (prescribed coordinates are taken there)."),
+    fmt: TableFormat = typer.Option(TableFormat.text, "--format", "-f", help="Output format."),
+    set_: Optional[List[str]] = SetOption,
+    output: Optional[Path] = OutputOption,
+) -> None:
+    """Inverse dynamics at one instant, without integrating: the file's state (prescribed coordinates at --at)
+    assembled onto the constraints, its accelerations, driving forces, constraint multipliers, joint reactions
+    and outputs."""
+
+    def body() -> int:
+        import mechsys
+        from mechsys.analysis.inverse import inverse_dynamics
+        from mechsys.model.load import parse_assignments
+        from mechsys.report.inverse import instant_payload, instant_tables
+
+        check_number("--at", at)
+        check_outputs(output)
+        model = mechsys.load(file, parse_assignments(set_), release_prescribed=True)
+        inst = inverse_dynamics(model, at)
+        emit_tables(instant_tables(inst), fmt, output, instant_payload(inst))
+        return 0
+
+    run(body)
+
+
+@app.command()
 def check(
     paths: List[Path] = typer.Argument(..., help="Model files or directories (searched recursively)."),
     jobs: Optional[int] = typer.Option(None, "--jobs", "-j", help="Local worker processes (default: all cores)."),

@@ -27,19 +27,27 @@ def output_columns(model: MechanicalModel, result: SimulationResult, p: np.ndarr
     """Each output of ``model`` at every output time of ``result`` (a simulation of this model with parameter
     vector ``p``). An output with accelerations (acceleration(P), der(der(q))) takes q'' from the equations of
     motion at each time, with the resting contacts of the run held as in the run."""
-    from mechsys.numeric.lambdify import compile_exprs
-
     if not model.outputs:
         return {}
-    names = [name for name, _ in model.outputs]
-    exprs = [e for _, e in model.outputs]
-    fn = compile_exprs(exprs, [model.t, *model.q, *model.u, *model.a, *model.parameter_symbols])
-    accels = [a for a, _lam in accelerations_along(model, result, p)] \
-        if any(set(model.a) & e.free_symbols for e in exprs) else np.zeros_like(result.u)
-    p = np.asarray(p, float)
-    data = np.array([fn(float(t), *q, *u, *a, *p) for t, q, u, a in zip(result.t, result.q, result.u, accels)],
-                    dtype=float).reshape(len(result.t), len(names))
-    return {name: data[:, k] for k, name in enumerate(names)}
+    fn = compile_outputs(model)
+    accels = [a for a, _lam in accelerations_along(model, result, p)] if needs_accelerations(model) \
+        else np.zeros_like(result.u)
+    data = np.array([fn(float(t), q, u, a, p) for t, q, u, a in zip(result.t, result.q, result.u, accels)],
+                    dtype=float).reshape(len(result.t), len(model.outputs))
+    return {name: data[:, k] for k, (name, _e) in enumerate(model.outputs)}
+
+
+def compile_outputs(model: MechanicalModel):
+    """fn(t, q, u, q'', p) -> the outputs' values, in the order of ``model.outputs``."""
+    from mechsys.numeric.lambdify import compile_exprs
+
+    raw = compile_exprs([e for _, e in model.outputs],
+                        [model.t, *model.q, *model.u, *model.a, *model.parameter_symbols])
+    return lambda t, q, u, a, p: raw(t, *q, *u, *a, *np.asarray(p, float))
+
+
+def needs_accelerations(model: MechanicalModel) -> bool:
+    return any(set(model.a) & e.free_symbols for _, e in model.outputs)
 
 
 def accelerations_along(model: MechanicalModel, result: SimulationResult, p: np.ndarray):

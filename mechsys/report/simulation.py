@@ -260,7 +260,7 @@ def plot_histories(names: list[str], data: np.ndarray, path: str, option: str = 
     if "t" not in names:
         raise InputError("the result has no 't' column")
     t = data[:, names.index("t")]
-    coords = [n for n in names if n not in ("t", "T", "V", "E", "residual") and not n.startswith("der(")]
+    coords = [n for n in names if f"der({n})" in names]  # not outputs, reactions or driving forces
     fig, axes = plt.subplots(2, 2, figsize=(10, 7))
     for c in coords:
         axes[0, 0].plot(t, data[:, names.index(c)], label=c)
