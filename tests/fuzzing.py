@@ -39,7 +39,8 @@ DATA = ROOT / "tests" / "data"
 DEFAULT_SEED = 20240521
 
 # seconds a command may take on a loaded 2-core machine before it counts as a hang
-TIMEOUTS = {"info": 90, "derive": 120, "equilibria": 180, "modes": 180, "simulate": 120, "collide": 90}
+TIMEOUTS = {"info": 90, "derive": 120, "equilibria": 180, "modes": 180, "simulate": 120, "collide": 90,
+            "inverse": 90}
 # models whose equilibria/modes take 10-30 s already unmutated (slow suite only), and over 40 s (never)
 SLOW_ANALYSIS = {"torque_free_body", "newton_cradle", "winch_gear"}
 VERY_SLOW_ANALYSIS = {"friction_sphere_3d", "two_free_bodies"}
@@ -513,6 +514,8 @@ def _analysis_command(rng: random.Random, name: str, sets: list[str]) -> Command
         extra = [rng.choice(["--state-space", "--frf=0:20:5"])]
     elif name == "collide" and rng.random() < 0.2:
         extra = ["--percussion"]
+    elif name == "inverse" and rng.random() < 0.5:
+        extra = ["--at", rng.choice(["0.3", "2", "-1"])]
     return Command(name, ["-f", "json"] + extra + sets, TIMEOUTS[name], ("cold", "warm"))
 
 
@@ -525,6 +528,7 @@ def plan_commands(rng: random.Random, base: BaseModel, data: dict, slow: bool) -
         analyses += ["equilibria", "modes"]
     if base.contacts:
         analyses += ["collide", "collide"]
+    analyses.append("inverse")
     simulate = Command("simulate", simulate_args(rng) + sets, TIMEOUTS["simulate"], ("cold", "warm", "off"))
     if not slow:
         return [simulate, _analysis_command(rng, rng.choice(["info", "derive"] + analyses), sets)]
