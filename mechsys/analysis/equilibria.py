@@ -96,6 +96,19 @@ class EquilibriaResult:
     exhaustive: Exhaustive | None = None  # what the exhaustive mode computed (analysis/exhaustive.py)
     formulation: str = ""  # nonholonomic: independent speeds, eliminated and ignorable coordinates
 
+    def _repr_markdown_(self) -> str:
+        """Jupyter: the tables of `mechsys equilibria -f markdown`."""
+        from mechsys.report.notebook import equilibria_markdown
+
+        return equilibria_markdown(self)
+
+    def to_dataframe(self):
+        """One row per equilibrium or steady motion: coordinates, der(rates), stability, critical, reason,
+        max_real and the eigenvalues (needs pandas: ``pip install 'mechsys[notebook]'``)."""
+        from mechsys.report.notebook import equilibria_frame
+
+        return equilibria_frame(self)
+
 
 class EquilibriumProblem:
     """The algebraic equations of rest: f(q, u) + A^T lambda = 0 and Phi(q) = 0, with u = 0 except the steady

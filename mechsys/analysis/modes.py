@@ -45,6 +45,19 @@ class Modes:
             "unstable_modes": self.unstable_modes,
         }
 
+    def _repr_markdown_(self) -> str:
+        """Jupyter: the tables of `mechsys modes -f markdown`."""
+        from mechsys.report.notebook import modes_markdown
+
+        return modes_markdown(self)
+
+    def to_dataframe(self):
+        """One row per mode: frequency [rad/s], frequency [Hz], damping ratio, rigid body (needs pandas:
+        ``pip install 'mechsys[notebook]'``)."""
+        from mechsys.report.notebook import modes_frame
+
+        return modes_frame(self)
+
 
 @dataclass
 class ReducedSystem:

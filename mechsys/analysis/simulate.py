@@ -179,6 +179,19 @@ class SimulationResult:
                                 *self.driving.values(), *self.outputs.values()])
         return names, data
 
+    def _repr_markdown_(self) -> str:
+        """Jupyter: the summary table of `mechsys simulate -f markdown`."""
+        from mechsys.report.notebook import simulation_markdown
+
+        return simulation_markdown(self)
+
+    def to_dataframe(self):
+        """One row per output time, the columns of the result file (`mechsys simulate -o x.csv`): t, the
+        coordinates, der(q), T, V, E, residual, ... (needs pandas: ``pip install 'mechsys[notebook]'``)."""
+        from mechsys.report.notebook import simulation_frame
+
+        return simulation_frame(self)
+
 
 class RightHandSide:
     """y' = g(t, y) for y = (q, u); with constraints the accelerations solve [[M, A^T], [A, 0]] [q''; -lambda] = [f; b]."""

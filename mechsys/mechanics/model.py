@@ -44,6 +44,12 @@ class Equations:
         """M q'' - f, in the acceleration symbols (constraint forces not included)."""
         return self.M * sp.Matrix(self.a) - self.f
 
+    def _repr_latex_(self) -> str:
+        """Jupyter: M q'' = f and the constraint rows, as `derive -f latex` prints them."""
+        from mechsys.report.notebook import equations_latex
+
+        return equations_latex(self)
+
 
 class MechanicalModel:
     """A mechanical system: the document it came from, its kinematics, and derivations made on demand."""
@@ -96,6 +102,12 @@ class MechanicalModel:
         clone = copy.copy(self)
         clone.doc = doc
         return clone
+
+    def _repr_markdown_(self) -> str:
+        """Jupyter: the `info` tables, the initial state and the parameter values."""
+        from mechsys.report.notebook import model_markdown
+
+        return model_markdown(self)
 
     # ------------------------------------------------------------------------------------- basics
     @property

@@ -65,10 +65,17 @@ def render_text(eq: Equations, name: str) -> str:
 
 
 def _latex_lines(eq: Equations) -> list[tuple[str, str]]:
-    acc = {j: to_latex(a) for j, a in enumerate(eq.a)}
     rows = [("T", f"T &= {to_latex(eq.T)}"), ("V", f"V &= {to_latex(eq.V)}")]
     for i, c in enumerate(eq.coordinates):
         rows.append((f"Q_{c}", f"Q_{{{to_latex(eq.q[i])}}} &= {to_latex(eq.Q[i])}"))
+    return rows + latex_equations(eq)
+
+
+def latex_equations(eq: Equations) -> list[tuple[str, str]]:
+    """(label, ``lhs &= rhs``) of each equation of motion (label: its coordinate) and constraint row (its name),
+    in LaTeX with dotted rates: the rows of ``derive -f latex`` after T, V and Q."""
+    acc = {j: to_latex(a) for j, a in enumerate(eq.a)}
+    rows = []
     for i, c in enumerate(eq.coordinates):
         lhs = _lhs(eq, i, to_latex, " ", lambda j: acc[j])
         lam = _multiplier_terms(eq, i, to_latex, lambda k: f"\\lambda_{{{k + 1}}}", " ")
