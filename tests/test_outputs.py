@@ -169,3 +169,71 @@ def test_outputs_feed_check_expectations(tmp_path, capsys):
     assert run("check", str(model), "-f", "json") == 0
     report = json.loads(capsys.readouterr().out)
     assert (report["passed"], report["failed"], report["errors"]) == (2, 0, 0), report
+
+
+PIN_IN_TREE = """name: slider_crank_pin_in_tree
+description: the driven slider-crank with the crank pin A as a joint (rod on crank) and the loop closed at the slider
+parameters: {l2O: 0.1, l3A: 0.25, m2: 1.0, m3: 2.0, m4: 0.5, g: 9.81, M2: 0, F4: 4, omega2: 3}
+coordinates:
+  theta2: {prescribed: pi/4 + omega2*t}
+  phi: {initial: -asin(l2O*sin(pi/4)/l3A) - pi/4, rate: 0}   # rod angle relative to the crank
+  x4: {initial: 2*l2O*cos(pi/4) + 2*l3A*cos(asin(l2O*sin(pi/4)/l3A)), rate: 0}
+links:
+  crank:
+    joint: {type: revolute, parent: ground, axis: z, coordinate: theta2}
+    mass: m2
+    center_of_mass: [l2O, 0, 0]
+    shape: {rod: {length: 2*l2O, axis: x}}
+  rod:
+    joint: {type: revolute, parent: crank, axis: z, coordinate: phi, origin: [2*l2O, 0, 0]}
+    mass: m3
+    center_of_mass: [l3A, 0, 0]
+    shape: {rod: {length: 2*l3A, axis: x}}
+    points: {B: [2*l3A, 0, 0]}
+  slider:
+    joint: {type: prismatic, parent: ground, axis: x, coordinate: x4}
+    mass: m4
+constraints:
+  - {type: point_on_point, name: gudgeon, points: [rod.B, slider]}
+forces:
+  - {type: gravity, acceleration: [0, -g, 0]}
+  - {type: torque, on: crank, axis: z, value: M2}
+  - {type: force, at: slider, value: [F4, 0, 0]}
+outputs:
+  pin: reaction(rod)
+"""
+
+
+@pytest.mark.parametrize("t", ["0", "0.4"])
+def test_the_loop_closure_pin_force_equals_the_joint_reaction_of_the_same_pin(tmp_path, capsys, t):
+    """The crank pin A as a loop-closure constraint (docs/examples/slider_crank_driven.yaml: constraint_force of
+    crank_pin, the force on the rod at A) and as a revolute joint of the rod on the crank (reaction(rod): what the
+    crank transmits to the rod at A), the loop closed at the slider instead: the same force at the same instant."""
+    loop = tmp_path / "loop.yaml"
+    loop.write_text((ROOT / "docs/examples/slider_crank_driven.yaml").read_text().replace("F4: 0 ", "F4: 4 ")
+                    + "outputs:\n  pin: constraint_force(crank_pin)\n  pin_x: multiplier(crank_pin.x)\n")
+    tree = tmp_path / "tree.yaml"
+    tree.write_text(PIN_IN_TREE)
+    got = {}
+    for name, path in (("loop", loop), ("tree", tree)):
+        assert run("inverse", str(path), "--at", t, "-f", "json") == 0
+        got[name] = json.loads(capsys.readouterr().out)["outputs"]
+    for axis, comp in (("x", "Fx"), ("y", "Fy")):
+        assert got["loop"][f"pin.{axis}"] == pytest.approx(got["tree"][f"pin.{comp}"], rel=1e-8, abs=1e-9)
+    assert got["loop"]["pin_x"] == got["loop"]["pin.x"]
+    assert abs(got["tree"]["pin.Mz"]) < 1e-9  # a hinge carries no moment about its axis
+    assert abs(got["loop"]["pin.y"]) > 1  # a real load, not a trivial agreement
+
+
+@pytest.mark.parametrize("expression, message", [
+    ("constraint_force(crank_pin.x)", "unknown constraint"),
+    ("multiplier(crank_pin.z)", "takes a constraint row"),
+    ("reaction(ground)", "takes a link with a joint"),
+    ("2*reaction(rod)", "reaction(...).Fx"),
+])
+def test_bad_constraint_quantities_are_one_line(tmp_path, capsys, expression, message):
+    model = tmp_path / "bad.yaml"
+    model.write_text((ROOT / "docs/examples/slider_crank_driven.yaml").read_text() + f"outputs:\n  bad: {expression}\n")
+    assert run("info", str(model)) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "outputs.bad" in err and message in err, err

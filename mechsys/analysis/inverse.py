@@ -50,7 +50,7 @@ def inverse_dynamics(model: MechanicalModel, t: float = 0.0) -> Instant:
     motion, the drives' forces, every joint's reaction and the file's outputs. The free coordinates of a model
     with degrees of freedom keep the file's values: the state at t of a motion is `simulate`'s."""
     from mechsys.analysis.equilibria import parameter_values
-    from mechsys.analysis.outputs import compile_outputs
+    from mechsys.analysis.outputs import compile_outputs, deferred_values
     from mechsys.analysis.reactions import wrenches
     from mechsys.analysis.simulate import RightHandSide, check_on_manifold, compile_model, file_state, project
 
@@ -69,7 +69,7 @@ def inverse_dynamics(model: MechanicalModel, t: float = 0.0) -> Instant:
     reactions = {j.link: np.asarray(w[j.link], float) for j in model.kin.joints}
     outputs = {}
     if model.outputs:
-        values = compile_outputs(model)(t, q, u, a, p)
+        values = compile_outputs(model)(t, q, u, a, p, deferred_values(model, t, q, u, a, lam, p))
         outputs = {name: float(v) for (name, _e), v in zip(model.outputs, values)}
     warnings = []
     moved = [n for n, qa, qg in zip(model.coordinates, q, guess_q) if abs(qa - qg) > 1e-9 * (1 + abs(qg))]

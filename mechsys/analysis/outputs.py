@@ -30,24 +30,47 @@ def output_columns(model: MechanicalModel, result: SimulationResult, p: np.ndarr
     if not model.outputs:
         return {}
     fn = compile_outputs(model)
-    accels = [a for a, _lam in accelerations_along(model, result, p)] if needs_accelerations(model) \
-        else np.zeros_like(result.u)
-    data = np.array([fn(float(t), q, u, a, p) for t, q, u, a in zip(result.t, result.q, result.u, accels)],
-                    dtype=float).reshape(len(result.t), len(model.outputs))
+    needs = needs_accelerations(model)
+    rows = []
+    states = zip(result.t, result.q, result.u)
+    if needs:
+        for (t, q, u), (a, lam) in zip(states, accelerations_along(model, result, p)):
+            rows.append(fn(float(t), q, u, a, p, deferred_values(model, float(t), q, u, a, lam, p)))
+    else:
+        zero = np.zeros(len(model.q))
+        rows = [fn(float(t), q, u, zero, p, ()) for t, q, u in states]
+    data = np.array(rows, dtype=float).reshape(len(result.t), len(model.outputs))
     return {name: data[:, k] for k, (name, _e) in enumerate(model.outputs)}
 
 
 def compile_outputs(model: MechanicalModel):
-    """fn(t, q, u, q'', p) -> the outputs' values, in the order of ``model.outputs``."""
+    """fn(t, q, u, q'', p, deferred) -> the outputs' values, in the order of ``model.outputs``; ``deferred``: the
+    values of the multiplier and reaction placeholders (deferred_values)."""
     from mechsys.numeric.lambdify import compile_exprs
 
     raw = compile_exprs([e for _, e in model.outputs],
-                        [model.t, *model.q, *model.u, *model.a, *model.parameter_symbols])
-    return lambda t, q, u, a, p: raw(t, *q, *u, *a, *np.asarray(p, float))
+                        [model.t, *model.q, *model.u, *model.a, *model.parameter_symbols,
+                         *model.deferred_quantities])
+    return lambda t, q, u, a, p, deferred: raw(t, *q, *u, *a, *np.asarray(p, float), *deferred)
 
 
 def needs_accelerations(model: MechanicalModel) -> bool:
-    return any(set(model.a) & e.free_symbols for _, e in model.outputs)
+    """Whether an output needs q'' (or multipliers, reactions): the equations are solved at each output time."""
+    return bool(model.deferred_quantities) or any(set(model.a) & e.free_symbols for _, e in model.outputs)
+
+
+def deferred_values(model: MechanicalModel, t: float, q: np.ndarray, u: np.ndarray, a: np.ndarray,
+                    lam: np.ndarray, p: np.ndarray) -> list[float]:
+    """The values of the placeholders of multipliers and joint reactions at one state."""
+    if not model.deferred_quantities:
+        return []
+    wrench = None
+    if any(kind == "reaction" for kind, _w, _k in model.deferred_quantities.values()):
+        from mechsys.analysis.reactions import wrenches
+
+        wrench = wrenches(model, t, q, u, a, lam, p)
+    return [float(lam[k]) if kind == "multiplier" else float(wrench[what][k])
+            for kind, what, k in model.deferred_quantities.values()]
 
 
 def accelerations_along(model: MechanicalModel, result: SimulationResult, p: np.ndarray):

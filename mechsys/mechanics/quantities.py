@@ -11,9 +11,14 @@ the joint point), ``link.com``, ``link.NAME``, ``ground.NAME``. ``system`` means
 | angular_momentum(L or system [, P]) | sum of (r_G - r_P) x m v_G + R I omega, about P (default: the ground origin) |
 | kinetic_energy(L or system) | T |
 | momentum_of(q) | the generalized momentum dT/d(der(q)) |
+| reaction(L) | (Fx, Fy, Fz, Mx, My, Mz): the wrench L's joint transmits to L's subtree (analysis/reactions.py) |
+| constraint_force(C) | the force a point_on_point or rolling constraint C applies at its (first) point |
+| multiplier(ROW) | the Lagrange multiplier of one constraint row (M q'' = f + A^T lambda), e.g. crank_pin.x |
 
 Accelerations (acceleration(P), der(der(q))) contain the acceleration symbols of the coordinates; the
-evaluation along a motion (analysis/outputs.py) supplies them from the equations of motion.
+evaluation along a motion (analysis/outputs.py) supplies them from the equations of motion. Multipliers and
+reactions are not expressions of the state: they enter as placeholder symbols (``ModelQuantities.deferred``)
+whose values the evaluation computes at each time from the multipliers and the Newton-Euler wrenches.
 """
 from __future__ import annotations
 
@@ -30,8 +35,11 @@ if TYPE_CHECKING:
 
 #: name -> (smallest, largest) number of arguments
 ARITY = {"position": (1, 1), "velocity": (1, 1), "acceleration": (1, 1), "angular_velocity": (1, 1),
-         "momentum": (1, 1), "angular_momentum": (1, 2), "kinetic_energy": (1, 1), "momentum_of": (1, 1)}
-SCALAR = {"kinetic_energy", "momentum_of"}
+         "momentum": (1, 1), "angular_momentum": (1, 2), "kinetic_energy": (1, 1), "momentum_of": (1, 1),
+         "reaction": (1, 1), "constraint_force": (1, 1), "multiplier": (1, 1)}
+WRENCH = ("Fx", "Fy", "Fz", "Mx", "My", "Mz")
+#: constraint types whose rows are the ground components of a force at their (first) point
+POINT_FORCES = ("point_on_point", "rolling")
 
 
 class ModelQuantities(Quantities):
@@ -45,9 +53,10 @@ class ModelQuantities(Quantities):
                        **{n: model.doc.accels[n] for n in model.coordinates}}
         self.builder = Builder(model.doc)
         self.builder.kin = model.kin  # only its point lookups are used, on the model's frames
+        self.deferred: dict[sp.Symbol, tuple[str, object, int]] = {}  # placeholder -> (kind, row or link, index)
 
     def components(self, name: str) -> tuple[str, ...]:
-        return ("x", "y", "z")
+        return WRENCH if name == "reaction" else ("x", "y", "z")
 
     def evaluate(self, name: str, refs: list[tuple[str, int]], pos: int) -> sp.Expr | sp.MatrixBase:
         lo, hi = ARITY[name]
@@ -55,6 +64,8 @@ class ModelQuantities(Quantities):
             count = f"{lo}" if lo == hi else f"{lo} or {hi}"
             raise ExpressionError(f"{name}() takes {count} argument(s), got {len(refs)}", pos)
         ref, at = refs[0]
+        if name in ("reaction", "constraint_force", "multiplier"):
+            return self.constraint_quantity(name, ref, at)
         if name in ("position", "velocity", "acceleration"):
             frame, local = self.point(ref, at)
             if name == "position":
@@ -81,6 +92,37 @@ class ModelQuantities(Quantities):
             if not b.particle:
                 H += f.R * (b.inertia * w)
         return H
+
+    def constraint_quantity(self, name: str, ref: str, at: int) -> sp.Expr | sp.MatrixBase:
+        rows = [c.name for c in self.model.kin.constraints]
+        if name == "reaction":
+            joints = [j.link for j in self.model.kin.joints]
+            if ref not in joints:
+                raise ExpressionError(f"reaction() takes a link with a joint{_hint(ref, joints)}", at)
+            return sp.Matrix([self.placeholder("reaction", ref, k) for k in range(6)])
+        if name == "multiplier":
+            if ref not in rows:
+                raise ExpressionError(f"multiplier() takes a constraint row{_hint(ref, rows)}", at)
+            return self.placeholder("multiplier", ref, rows.index(ref))
+        kinds = {c.name or f"{c.type}_{i + 1}": c.type for i, c in enumerate(self.model.doc.spec.constraints)}
+        if kinds.get(ref) not in POINT_FORCES:
+            why = f"{ref!r} is a {kinds[ref]} constraint: use multiplier(ROW)" if ref in kinds else \
+                f"unknown constraint{_hint(ref, list(kinds))}"
+            raise ExpressionError(f"constraint_force() takes a point_on_point or rolling constraint; {why}", at)
+        force = sp.zeros(3, 1)
+        for k, row in enumerate(rows):
+            if row.startswith(ref + ".") and row[len(ref) + 1:] in ("x", "y", "z"):
+                force["xyz".index(row[-1])] = self.placeholder("multiplier", row, k)
+        return force
+
+    def placeholder(self, kind: str, what: str, index: int) -> sp.Symbol:
+        """A symbol standing for a value the evaluation computes (a multiplier, a joint wrench component)."""
+        for sym, key in self.deferred.items():
+            if key == (kind, what, index):
+                return sym
+        sym = sp.Dummy(f"{kind}_{index}", real=True)
+        self.deferred[sym] = (kind, what, index)
+        return sym
 
     # ------------------------------------------------------------------------------------- references
     def point(self, ref: str, at: int):
@@ -117,10 +159,12 @@ def _hint(name: str, options: list[str]) -> str:
 
 
 def parse_outputs(model: MechanicalModel) -> list[tuple[str, sp.Expr]]:
-    """(column name, expression in t, q, der(q), der(der(q)) and parameters) for each of the file's `outputs:`;
-    a vector quantity written as the whole expression gives the columns NAME.x, NAME.y, NAME.z."""
+    """(column name, expression in t, q, der(q), der(der(q)), parameters and the placeholders of multipliers and
+    reactions, kept as ``model.deferred_quantities``) for each of the file's `outputs:`; a vector quantity written
+    as the whole expression gives the columns NAME.x, NAME.y, NAME.z (a reaction NAME.Fx ... NAME.Mz)."""
     doc = model.doc
     spec = doc.spec.outputs
+    model.deferred_quantities = {}
     if not spec:
         return []
     taken = set(model.coordinates) | set(doc.parameters) | set(doc.prescribed) | {"t", "T", "V", "E", "residual"}
@@ -132,8 +176,10 @@ def parse_outputs(model: MechanicalModel) -> list[tuple[str, sp.Expr]]:
                                                "result column", key=True)
         value = doc.parse(text, ("outputs", name), "force", quantities=quantities)
         if isinstance(value, sp.MatrixBase):
-            out += [(f"{name}.{c}", e) for c, e in zip(quantities.components(""), value)]
+            names = WRENCH if len(value) == 6 else ("x", "y", "z")
+            out += [(f"{name}.{c}", e) for c, e in zip(names, value)]
         else:
             out.append((name, value))
+    model.deferred_quantities = quantities.deferred
     return out
 

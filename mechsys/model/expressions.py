@@ -321,7 +321,8 @@ class _Parser:
             return value[names.index(comp.text)]
         if start == 0 and self.peek().kind == "end":
             return value  # the whole expression: one column per component
-        raise ExpressionError(f"{tok.text}() is a vector: take a component ({tok.text}(...).x) or its norm "
+        first = self.quantities.components(tok.text)[0]
+        raise ExpressionError(f"{tok.text}() is a vector: take a component ({tok.text}(...).{first}) or its norm "
                               f"(norm({tok.text}(...)))", tok.pos)
 
     def quantity_value(self, tok: _Tok) -> sp.Expr | sp.MatrixBase:
