@@ -978,18 +978,30 @@ def sweep(
 @app.command()
 def codegen(
     file: Path = typer.Argument(..., help="Model file (YAML)."),
-    target: str = typer.Option(..., "--target", "-t", help="Language of the package: c, python or matlab."),
+    target: str = typer.Option(..., "--target", "-t", help="Language of the package: c, python or matlab; or fmu "
+                                                           "(an FMI 2.0 Model Exchange FMU built with gcc)."),
     output: Path = typer.Option(..., "--output", "-o", help="Directory of the package (new, empty, or a previous "
-                                                            "package, which is replaced; written atomically)."),
+                                                            "package, which is replaced; written atomically), or "
+                                                            "the NAME.fmu file of --target fmu."),
     method: Method = typer.Option(Method.lagrange, "--method", "-m", help="Formulation of M and f."),
     set_: Optional[List[str]] = SetOption,
 ) -> None:
-    """Write the equations of motion as a standalone C, Python or MATLAB/Octave package (no mechsys needed)."""
+    """Write the equations of motion as a standalone C, Python or MATLAB/Octave package (no mechsys needed), or as
+    an FMI 2.0 Model Exchange FMU."""
 
     def body() -> int:
         from mechsys.codegen import check_destination, check_target, write_package
 
-        check_target(target)
+        if check_target(target) == "fmu":
+            from mechsys.codegen.fmu import check_fmu_output, find_gcc, write_fmu
+
+            check_fmu_output(output)
+            find_gcc()
+            summary = write_fmu(load_model(file, set_), output, method.value)
+            for warning in summary.warnings:
+                sys.stderr.write(f"mechsys: warning: {warning}\n")
+            sys.stdout.write(summary.line() + "\n")
+            return 0
         check_destination(output)
         files = write_package(load_model(file, set_), target, output, method.value)
         sys.stdout.write(f"wrote {output}: {', '.join(files)}\n")
