@@ -567,7 +567,8 @@ def simulate(
     """Integrate the equations of motion from the file's initial state and report speed and accuracy measures."""
 
     def body() -> int:
-        from mechsys.report.simulation import check_result_path, plot_histories, summary_table, write_result
+        from mechsys.report.simulation import (check_result_path, plot_histories, summary_payload, summary_table,
+                                               write_result)
 
         check_time_grid(t_end, dt)
         check_tolerances(rtol, atol)
@@ -610,7 +611,7 @@ def simulate(
             from mechsys.report.simulation import events_text
 
             write_atomic(events_file, events_text(result.events, result.coordinates, events_file.suffix))
-        emit_tables(summary_table(result), fmt, None)
+        emit_tables(summary_table(result), fmt, None, summary_payload(result))
         return 0
 
     run(body)

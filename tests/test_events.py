@@ -160,3 +160,19 @@ def test_a_crossing_on_an_output_time_of_a_closed_loop_is_recorded_once(tmp_path
     r = simulate(mechsys.load(path), 1.0, 0.01, method="DOP853")
     assert 0.5 in r.t
     assert [e["t"] for e in r.events] == [0.5]
+
+
+@pytest.mark.parametrize("method", ["DOP853", "Radau", "CVODE"])
+def test_a_run_that_starts_on_an_event_surface_has_not_crossed_it(tmp_path, method):
+    """y(0) = h on the surface y - h = 0 of both a recorded and a stop event (falling, and the ball falls at
+    once): nothing at t = 0, the run is not stopped there, and the ground is still found at sqrt(2 h / g)."""
+    if method == "CVODE":
+        pytest.importorskip("sksundae")
+    text = (ROOT / "tests" / "data" / "falling_events.yaml").read_text()
+    text = text.replace("expression: y - h/2, direction: falling}", "expression: y - h, direction: falling}")
+    text += "  - {name: start_level, expression: h - y, direction: rising, action: stop}\n"
+    path = tmp_path / "start_on_surface.yaml"
+    path.write_text(text)
+    r = simulate(mechsys.load(path), 2.0, 0.01, method)
+    assert [ev["event"] for ev in r.events] == ["ground"]
+    assert r.events[0]["t"] == pytest.approx((2 * 2 / 9.81) ** 0.5, rel=1e-8)

@@ -72,7 +72,7 @@ def double_pendulum_frequencies(m1, m2, l1, l2, g):
 
 
 def summary(data: dict) -> dict:
-    return {row["quantity"]: row["value"] for row in data["simulation summary"]}
+    return data["simulation summary"]
 
 
 # ----------------------------------------------------------------------------------------- 1. aliases

@@ -435,5 +435,11 @@ def simulate_charted(model: MechanicalModel, t_end: float, dt: Optional[float] =
         notes.append(_note_switches(joints, state.switches, options))
     notes += _note_undefined(state.undefined, options)
     timings["re-charting"] = max(0.0, time.perf_counter() - started - totals["seconds"])
-    return SimulationResult(list(model.coordinates), grid, state.Q, state.U, state.T, state.V, np.zeros(len(grid)),
-                            tol["method"], totals["rhs"], totals["steps"], timings, warnings + notes)
+    out = SimulationResult(list(model.coordinates), grid, state.Q, state.U, state.T, state.V, np.zeros(len(grid)),
+                           tol["method"], totals["rhs"], totals["steps"], timings, warnings + notes)
+    from mechsys.analysis.simulate import compile_model, nonconservative_work
+
+    with np.errstate(all="ignore"):  # the work rate in the file's angles, finite off the lock itself
+        work = nonconservative_work(compile_model(model), p, grid, state.Q, state.U)
+    out.work = work if work is None or np.all(np.isfinite(work)) else None
+    return out

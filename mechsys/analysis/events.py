@@ -86,7 +86,9 @@ def crossings(events: Sequence[Callable], directions: np.ndarray, interp: Callab
     """Zero crossings of every event function in the step (t_old, t_new] whose state is ``interp(t)``: sign changes
     between samples of the dense output, and pairs of roots inside a dip of |g| that does not change sign at any
     sample (a near-tangential touch). Returns (g at t_new, [(t, event index, direction)] in time order), keeping
-    only the crossings each event's direction asks for."""
+    only the crossings each event's direction asks for. At the ``first`` step of a solve a zero start value counts
+    as a crossing (as scipy's solve_ivp does; what a restart after an impact relies on), except for an event
+    function with ``start_counts = False``: the file's events, whose start on the surface is not an event."""
     g_new = [float(g(t_new, y_new)) for g in events]
     if not t_new > t_old:
         return g_new, []
@@ -97,7 +99,7 @@ def crossings(events: Sequence[Callable], directions: np.ndarray, interp: Callab
         def h(t, g=g):
             return float(g(t, y_new if t == t_new else interp(t)))
         G = np.array([g_old[k], *(float(g(t, inner[:, i])) for i, t in enumerate(ts[1:-1])), g_new[k]])
-        roots = _sign_changes(h, ts, G, first)
+        roots = _sign_changes(h, ts, G, first and getattr(g, "start_counts", True))
         for s, a, b in _dip_brackets(h, ts, G):
             t_min, value = _dip(h, s, a, b)
             if value < 0.0:  # g crosses zero and comes back: both roots, falling then rising for s > 0

@@ -48,6 +48,9 @@ class Compiled:
     gap_names: list = field(default_factory=list)
     native: object = None  # the loaded native integrator (numeric/native.py), once asked for
     charts: list = field(default_factory=list)  # (link, joint type, sequence, angle indices) of rotation sequences
+    Q: object = None  # generalized forces not derived from V (their power is the non-conservative work rate)
+    Q_zero: bool = True  # Q vanishes identically
+    rheonomic_rows: bool = False  # some constraint row depends on t explicitly (drives, moving surfaces)
 
 
 def _contact_sources(model: MechanicalModel, args) -> dict:
@@ -82,6 +85,8 @@ def _compiled_from(desc: dict) -> Compiled | None:
         out.gap_A = matrix_from_source(desc["gap_A"])
         out.gap_b = matrix_from_source(desc["gap_b"])
         out.gap_names = [str(x) for x in desc["gap_names"]]
+        out.Q = matrix_from_source(desc["Q"])
+        out.Q_zero, out.rheonomic_rows = bool(desc["Q_zero"]), bool(desc["rheonomic_rows"])
     except (KeyError, TypeError, ValueError, SyntaxError):
         return None
     n, m = out.n, out.m
@@ -121,6 +126,10 @@ def compile_model(model: MechanicalModel) -> Compiled:
             "events": matrix_source(sp.Matrix([e[1] for e in model.events]) if model.events else sp.zeros(0, 1),
                                     *args),
             **_contact_sources(model, args),
+            "Q": matrix_source(model.generalized_forces, *args),
+            "Q_zero": all(e == 0 for e in model.generalized_forces),
+            "rheonomic_rows": any(sp.sympify(c.velocity).xreplace({u: 0 for u in model.u}) != 0
+                                  for c in model.kin.constraints),  # a_t != 0: the row moves by itself
         }
         cache.store(key, desc)
         out = _compiled_from(desc)
@@ -161,10 +170,42 @@ class SimulationResult:
     events: list[dict] = field(default_factory=list)  # {"t", "event", "state": {...}} in time order
     impacts: list[dict] = field(default_factory=list)  # {"t", "contact", "impulse", "rates_before", ...}
     outputs: dict = field(default_factory=dict)  # the file's `outputs:` column -> values (analysis/outputs.py)
+    work: np.ndarray | None = None  # work of the non-conservative forces since t = 0 (None: conservative run)
 
     @property
     def E(self) -> np.ndarray:
         return self.T + self.V
+
+    @property
+    def conservative(self) -> bool:
+        """No non-conservative force, no driven or moving constraint, no impact: E(t) should stay E(0)."""
+        return self.work is None and not self.impacts
+
+    @property
+    def energy_balance(self) -> np.ndarray:
+        """E(t) - E(0) - W(t) - (the energy changes of the impacts up to t): zero up to the integration error."""
+        out = self.E - self.E[0] - (self.work if self.work is not None else 0.0)
+        for im in self.impacts:
+            out = out + np.where(self.t >= im["t"], float(im["energy_loss"]), 0.0)
+        return out
+
+    @property
+    def energy_balance_error(self) -> float:
+        """max |energy_balance| / max(|E(0)|, max T, max |W|): the drift of a conservative run, and for any other
+        run the part of the energy change that no force accounts for."""
+        scale = max(abs(self.E[0]), float(np.max(np.abs(self.T))), 1e-300)
+        if self.work is not None:
+            scale = max(scale, float(np.max(np.abs(self.work))))
+        return float(np.max(np.abs(self.energy_balance)) / scale)
+
+    @property
+    def work_quadrature_error(self) -> float:
+        """The estimated error of W from the output grid (relative, as energy_balance_error): a balance error of
+        this size says the grid is coarse for the quadrature (refine --dt), not that the integration is poor."""
+        if self.work is None:
+            return 0.0
+        scale = max(abs(self.E[0]), float(np.max(np.abs(self.T))), float(np.max(np.abs(self.work))), 1e-300)
+        return float(getattr(self.work, "quadrature_error", 0.0)) / scale
 
     @property
     def energy_drift(self) -> float:
@@ -307,6 +348,52 @@ def project(c: Compiled, p: np.ndarray, t: float, q: np.ndarray, u: np.ndarray) 
     return q, u
 
 
+def nonconservative_work(c: Compiled, p: np.ndarray, grid: np.ndarray, q: np.ndarray, u: np.ndarray,
+                         lams: np.ndarray | None = None) -> np.ndarray | None:
+    """W(t): the work since t = 0 of the generalized forces not derived from V (Q . q') and of the constraint
+    forces of rows that depend on t (lambda . A q': drives, moving surfaces; a scleronomic row does no work), by
+    the composite Simpson rule on the output grid (trapezoid on the last interval of an even count; across an
+    impact the power jumps, and the impact's own energy change is reported apart). None for a run whose forces
+    are all conservative. ``lams``: the multipliers at the output times when the caller has them."""
+    if c.Q is None or (c.Q_zero and not (c.rheonomic_rows and c.m)):
+        return None
+    power = np.zeros(len(grid))
+    if not c.Q_zero:
+        power += np.array([float(np.ravel(c.Q(t, qi, ui, p)) @ ui) for t, qi, ui in zip(grid, q, u)])
+    if c.rheonomic_rows and c.m:
+        if lams is None:
+            rhs = RightHandSide(c, p)
+            lams = np.array([rhs.accelerations(t, qi, ui)[1][:c.m] for t, qi, ui in zip(grid, q, u)])
+        power += np.array([float(lam[:c.m] @ (c.A(t, qi, ui, p) @ ui)) for t, lam, qi, ui in zip(grid, lams, q, u)])
+    work = _cumulative_simpson(grid, power)
+    coarse = _cumulative_simpson(grid[::2], power[::2])  # Richardson: the error of the fine rule is ~ 1/15 of
+    work.quadrature_error = float(np.max(np.abs(work[::2] - coarse))) / 15  # the difference (Simpson, h^4)
+    return work
+
+
+class Work(np.ndarray):
+    """W(t) at the output times, with ``quadrature_error``: an estimate of the error of the rule on this grid."""
+
+    quadrature_error: float = 0.0
+
+
+def _cumulative_simpson(t: np.ndarray, y: np.ndarray) -> Work:
+    """The integral of y from t[0], piece by piece between repeated times (the rows before and after an impact
+    share their time: the power jumps there, the work does not)."""
+    from scipy.integrate import cumulative_simpson
+
+    out = np.zeros(len(t))
+    cuts = [0, *(np.flatnonzero(np.diff(t) <= 0) + 1), len(t)]
+    for a, b in zip(cuts[:-1], cuts[1:]):
+        ts, ys = t[a:b], y[a:b]
+        if len(ts) >= 3:
+            part = cumulative_simpson(ys, x=ts)
+        else:
+            part = np.cumsum(np.diff(ts) * (ys[1:] + ys[:-1]) / 2)
+        out[a:b] = (out[a - 1] if a else 0.0) + np.concatenate([[0.0], part])
+    return out.view(Work)
+
+
 def residual_tolerance(q: np.ndarray, u: np.ndarray) -> float:
     """The largest constraint residual a projected state may keep: RESIDUAL_TOLERANCE x (1 + max |q|, |q'|).
     A converged projection leaves ~1e-14; more means no nearby state satisfies the constraints."""
@@ -369,6 +456,7 @@ def _event_functions(model: MechanicalModel, c: Compiled, p: np.ndarray) -> list
             return float(c.events(t, y[:n], y[n:], p)[k, 0])
         g.direction = {"rising": 1.0, "falling": -1.0, "both": 0.0}[direction]
         g.terminal = action == "stop"
+        g.start_counts = False  # a run that starts on the surface has not crossed it: no event at t = 0
         fns.append(g)
     return fns
 
@@ -676,12 +764,15 @@ def simulate(model: MechanicalModel, t_end: float, dt: float | None = None, meth
     res = constraint_residual(c, p, grid, q, u)
     driving = {}
     rows = [k for k, con in enumerate(model.kin.constraints) if con.name.startswith("drive(")]
+    lams = None
     if rows:
         lams = np.array([rhs.accelerations(t, qi, ui)[1] for t, qi, ui in zip(grid, q, u)])
         for k in rows:
             driving[model.kin.constraints[k].name[6:-1]] = lams[:, k]
+    work = nonconservative_work(c, p, grid, q, u, lams if not impacts else None)
     recorded.sort(key=lambda ev: ev["t"])
     out = SimulationResult(list(model.coordinates), grid, q, u, T, V, res, chosen, rhs.calls, steps, timings,
                            warnings, driving, recorded)
     out.impacts = impacts
+    out.work = work
     return out

@@ -73,6 +73,7 @@ def _simulate(model: MechanicalModel, options: dict) -> Outputs:
     t_end = float(options.get("t_end", 10.0))
     r = add_outputs(model, simulate_charted(model, t_end, options.get("dt"), options.get("method", "auto")))
     out: Outputs = {"t_end": float(r.t[-1]), "energy_drift": r.energy_drift,
+                    "energy_balance": r.energy_balance_error, "impacts": len(r.impacts),
                     "max_residual": float(np.max(r.residual)), "rhs_evaluations": r.rhs_evaluations,
                     "events": len(r.events)}
     for k, c in enumerate(r.coordinates):

@@ -59,8 +59,8 @@ def _load_plan(plan: dict) -> Optional[tuple]:
         y0 = np.array(plan["initial"], dtype=float)
         names = plan["coordinates"]
         # what projection and the energy columns read (the equations themselves are in the library)
-        mats = {k: matrix_from_source(plan[k]) for k in ("A", "phi", "T", "V", "cv")}
-        shapes = {"A": (m, n), "T": (1, 1), "V": (1, 1), "cv": (m, 1)}
+        mats = {k: matrix_from_source(plan[k]) for k in ("A", "phi", "T", "V", "cv", "Q")}
+        shapes = {"A": (m, n), "T": (1, 1), "V": (1, 1), "cv": (m, 1), "Q": (n, 1)}
         if (len(names) != n or not all(isinstance(x, str) for x in names) or m < 0
                 or p.shape != (nat.n_parameters,) or y0.shape != (2 * n,) or not np.all(np.isfinite(y0))
                 or any(mats[k].shape != shape for k, shape in shapes.items()) or mats["phi"].shape[1] != 1
@@ -70,7 +70,10 @@ def _load_plan(plan: dict) -> Optional[tuple]:
             return None
     except (OSError, KeyError, TypeError, ValueError, SyntaxError, AttributeError):
         return None
-    c = Compiled(None, mats["A"], None, mats["phi"], mats["T"], mats["V"], mats["cv"], n, m, 0.0)
+    c = Compiled(None, mats["A"], None, mats["phi"], mats["T"], mats["V"], mats["cv"], n, m, 0.0, Q=mats["Q"],
+                 Q_zero=bool(plan["Q_zero"]), rheonomic_rows=bool(plan["rheonomic_rows"]))
+    if c.rheonomic_rows and m:
+        return None  # the work of moving constraints needs their multipliers: the full path has the equations
     return nat, c, p, y0
 
 
@@ -92,7 +95,7 @@ def run_planned(path: Path, overrides: Sequence[str], t_end: float, dt: Optional
     nat, c, p, y0 = loaded
     if method == "auto" and plan["decay_rate"] * t_end > STIFF_STEPS:
         return None  # stiff over this horizon: the full path chooses an implicit method
-    from mechsys.analysis.simulate import constraint_residual, native_projected, output_grid
+    from mechsys.analysis.simulate import constraint_residual, native_projected, nonconservative_work, output_grid
 
     n, m = c.n, c.m
     load_seconds = time.perf_counter() - t0
@@ -120,8 +123,10 @@ def run_planned(path: Path, overrides: Sequence[str], t_end: float, dt: Optional
     if method == "auto":
         warnings.append(f"auto method: native (non-stiff: fastest decay rate {plan['decay_rate']:.3g} 1/s)")
     timings = {"load compiled code (warm plan)": load_seconds, "integrate": seconds}
-    return SimulationResult(list(plan["coordinates"]), grid, q, u, T, V, constraint_residual(c, p, grid, q, u),
-                            "native", nfev + (2 * n + 1 if method == "auto" else 0), steps, timings, warnings)
+    out = SimulationResult(list(plan["coordinates"]), grid, q, u, T, V, constraint_residual(c, p, grid, q, u),
+                           "native", nfev + (2 * n + 1 if method == "auto" else 0), steps, timings, warnings)
+    out.work = nonconservative_work(c, p, grid, q, u)
+    return out
 
 
 def remember(path: Path, overrides: Sequence[str], model, result: SimulationResult) -> None:
@@ -147,7 +152,8 @@ def remember(path: Path, overrides: Sequence[str], model, result: SimulationResu
     cache.store(key, {"coordinates": list(model.coordinates), "parameters": [float(x) for x in p],
                       "initial": [float(x) for x in y0], "decay_rate": radius, "library_key": nat.key,
                       "T": entry["T"], "V": entry["V"], "phi": entry["phi"], "A": entry["A"], "cv": entry["cv"],
-                      "m": entry["m"], "charts": charts,
+                      "m": entry["m"], "charts": charts, "Q": entry["Q"], "Q_zero": entry["Q_zero"],
+                      "rheonomic_rows": entry["rheonomic_rows"],
                       "warnings": [w for w in result.warnings if not w.startswith(("auto method", *NOTES))]})
 
 

@@ -234,9 +234,18 @@ def summary_table(result) -> list[Table]:
         t.add(f"{c}(t_end)", float(q))
         t.add(f"der({c})(t_end)", float(u))
     t.add("energy E(t_end) - E(0)", float(result.E[-1] - result.E[0]))
-    t.add("max relative energy drift", result.energy_drift)
+    if result.conservative:
+        t.add("max relative energy drift", result.energy_drift)
+    else:
+        if result.work is not None:
+            t.add("work of non-conservative forces W(t_end)", float(result.work[-1]))
+        if result.impacts:
+            t.add("energy lost in impacts", float(sum(im["energy_loss"] for im in result.impacts)))
+        t.add("max relative energy balance error", result.energy_balance_error)
+        if result.work is not None:
+            t.add("of which quadrature of W on the output grid (estimate)", result.work_quadrature_error)
     t.add("max constraint residual", float(np.max(result.residual)) if len(result.residual) else 0.0)
-    t.add("events recorded", len(result.events))
+    t.add("events recorded", len(result.events) + len(result.impacts))
     if result.impacts:
         t.add("impacts", len(result.impacts))
         t.add("last impact at t", result.impacts[-1]["t"])
@@ -245,7 +254,17 @@ def summary_table(result) -> list[Table]:
     for k, v in result.timings.items():
         t.add(f"wall time: {k} [s]", float(v))
     t.notes += result.warnings
+    if not result.conservative:
+        t.notes.append("energy balance: E(t) - E(0) - W(t) + (energy lost in impacts up to t), W the work of the "
+                       "non-conservative forces (damping, applied forces, drives, moving constraints; Simpson on "
+                       "the output grid); relative to max(|E(0)|, max T, max |W|)")
     return [t]
+
+
+def summary_payload(result) -> dict:
+    """The JSON of the summary: one object keyed by quantity (the rows of summary_table), and the notes."""
+    (table,) = summary_table(result)
+    return {"simulation summary": {row[0]: row[1] for row in table.rows}, "notes": list(table.notes)}
 
 
 def plot_histories(names: list[str], data: np.ndarray, path: str, option: str = "--plot") -> None:
