@@ -550,7 +550,9 @@ def simulate(
     output: Optional[Path] = typer.Option(None, "--output", "-o",
                                           help="Result file: .csv, .json or .parquet (atomic)."),
     plot: Optional[Path] = typer.Option(None, "--plot", help="Time histories, phase portrait, energy (.png/.svg)."),
-    animate: Optional[Path] = typer.Option(None, "--animate", help="Animated GIF of a planar mechanism (atomic)."),
+    animate: Optional[Path] = typer.Option(None, "--animate",
+                                           help="Animation (atomic): .html, a 3-D view of any model (one offline "
+                                                "file, needs plotly); .gif, a planar mechanism."),
     fps: Optional[float] = typer.Option(None, "--fps", help="Frames per second of --animate (default: real time)."),
     events_file: Optional[Path] = typer.Option(None, "--events", help="Write the recorded events (.csv or .json)."),
     impacts_file: Optional[Path] = typer.Option(None, "--impacts", help="Write the impact table (.csv or .json)."),
@@ -577,9 +579,9 @@ def simulate(
         if output is not None:
             check_result_path(output)  # reject a bad suffix (or Parquet without pyarrow) first
         if animate is not None:
-            from mechsys.report.animation import check_animation_path, write_animation
+            from mechsys.report.view3d import check_animate, write_animate
 
-            check_animation_path(animate, fps)
+            check_animate(animate, fps)  # the suffix chooses: .html (3-D, any model) or .gif (planar)
         check_figures(plot=plot)
         check_outputs(output, animate, events_file, impacts_file)
         check_model_file(file)  # before the warm path reads it: a FIFO would hang, a device never end
@@ -594,7 +596,7 @@ def simulate(
             bar.close()
         names, data = result.columns()
         if animate is not None:  # first: a non-planar model fails before any other file is written
-            write_animation(model, result, animate, fps, source=file)
+            write_animate(model, result, animate, fps, source=file)
         if reactions:
             from mechsys.analysis.reactions import append_reactions
 
@@ -612,6 +614,29 @@ def simulate(
 
             write_atomic(events_file, events_text(result.events, result.coordinates, events_file.suffix))
         emit_tables(summary_table(result), fmt, None, summary_payload(result))
+        return 0
+
+    run(body)
+
+
+@app.command()
+def view(
+    file: Path = typer.Argument(..., help="Model file (YAML)."),
+    output: Optional[Path] = typer.Option(None, "--output", "-o",
+                                          help="HTML file (atomic; default: the model file's name with .html, in "
+                                               "the current folder)."),
+    set_: Optional[List[str]] = SetOption,
+) -> None:
+    """Write a 3-D view of the initial configuration as one offline HTML file (needs plotly; no integration)."""
+
+    def body() -> int:
+        from mechsys.report.view3d import check_html_path, default_view_path, write_initial_view
+
+        target = output if output is not None else default_view_path(file)
+        check_html_path(target, "--output")
+        check_model_file(file)
+        write_initial_view(load_model(file, set_), target)
+        sys.stdout.write(f"wrote {target}\n")
         return 0
 
     run(body)

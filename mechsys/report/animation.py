@@ -192,7 +192,8 @@ def animation_frames(model, result, source: str | os.PathLike | None = None,
     if n is None:
         where = Path(source).name if source is not None else model.name
         raise InputError(f"--animate supports planar systems; {where} moves in three dimensions "
-                         "(its links do not all turn about one fixed axis within one plane)")
+                         "(its links do not all turn about one fixed axis within one plane); write an .html file "
+                         "for a 3-D view")
     basis, labels = plane_basis(n)
     return Frames(t, xyz @ basis.T, geo, labels)
 
