@@ -24,7 +24,13 @@ COMMANDS = {  # figure -> the tutorial's command(s) that draw it (in a scratch f
     "tutorial_centrifuge_basin.png": [
         "sweep systems/centrifuge.yaml --param beta=-3:3:25 --param der(beta)=-6:6:13 --run simulate "
         "--option t_end=200 -q -o basin.csv"],
+    "work_precision_double_pendulum.png": [
+        "bench systems/double_pendulum.yaml --t-end 5 --plot fig.png"],
 }
+#: the 3-D still: a frame of `simulate --animate` rendered by headless Chromium (skipped without it)
+STILL = ("rolling_disk_3d.png", "simulate systems/rolling_disk.yaml --t-end 2.5 --dt 0.025 --set lean=0.3 "
+                                "--set der(x)=1 --set der(yaw)=-2.475978465683165 --animate fig.html", 40)
+# (a steady turn: the yaw rate is a root of the steady-turning condition at lean 0.3, tests/test_outputs.py)
 
 
 def run_block(page: Path, folder: Path) -> None:
@@ -48,6 +54,30 @@ def main() -> None:
             else:
                 shutil.copy(folder / "fig.png", FIGURES / name)
         print(f"docs/figures/{name}")
+    still()
+
+
+def still() -> None:
+    """The 3-D still of the gallery, with the DevTools driver of tests/test_view3d.py (one browser tab)."""
+    name, command, frame = STILL
+    if shutil.which("chromium") is None:
+        print(f"docs/figures/{name}: skipped (no chromium on PATH)")
+        return
+    sys.path.insert(0, str(ROOT / "tests"))
+    from PIL import Image
+    from test_view3d import Browser
+
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp)
+        (folder / "systems").symlink_to(ROOT / "systems")
+        subprocess.run([MECHSYS, *command.split()], cwd=folder, check=True, capture_output=True)
+        browser = Browser(folder / "profile")
+        try:
+            tab = browser.tab(f"{(folder / 'fig.html').as_uri()}#frame={frame}", str(frame))
+            Image.fromarray(tab.screenshot().astype("uint8")).save(FIGURES / name)
+        finally:
+            browser.close()
+    print(f"docs/figures/{name}")
 
 
 if __name__ == "__main__":
