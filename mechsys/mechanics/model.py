@@ -268,11 +268,16 @@ class MechanicalModel:
         if method not in METHODS:
             raise ValueError(f"unknown method {method!r}; use one of {METHODS}")
         if method not in self._eqs:
-            M, f = self._lagrange() if method == "lagrange" else self._kane()
-            self._eqs[method] = Equations(
-                method, self.coordinates, self.q, self.u, self.a, M, f, self.generalized_forces,
-                self.kinetic_energy, self.potential_energy, self.constraint_jacobian, self.constraint_rhs,
-                [c.name for c in self.kin.constraints])
+            from mechsys.mechanics import derivations
+
+            eq = derivations.load(self, method)
+            if eq is None:
+                M, f = self._lagrange() if method == "lagrange" else self._kane()
+                eq = Equations(method, self.coordinates, self.q, self.u, self.a, M, f, self.generalized_forces,
+                               self.kinetic_energy, self.potential_energy, self.constraint_jacobian,
+                               self.constraint_rhs, [c.name for c in self.kin.constraints])
+                derivations.store(self, eq)
+            self._eqs[method] = eq
         return self._eqs[method]
 
     def _lagrange(self) -> tuple[sp.Matrix, sp.Matrix]:
@@ -377,6 +382,7 @@ class MechanicalModel:
 
     @cached_property
     def cyclic_decision(self):
+        from mechsys.mechanics import derivations
         from mechsys.mechanics.symmetry import decide
 
-        return decide(self)
+        return derivations.cyclic_decision(self, decide)

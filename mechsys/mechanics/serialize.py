@@ -1,0 +1,110 @@
+"""Sympy expressions as JSON data and back through a whitelist of node types: the derivation cache holds data.
+
+An expression list becomes a table of nodes (a DAG: a subexpression shared by several entries is stored once) and
+the indices of the roots. Each node is ``[kind, ...]``: ``["S", name]`` a symbol of the model (only names the
+caller lists are accepted, and they come back as the caller's own symbol objects), ``["I", digits]`` an integer,
+``["R", p, q]`` a rational, ``["F", sign, mantissa, exponent, bits, precision]`` a float (exact), ``["C", name]``
+a constant (pi, E, I, oo, -oo, zoo, nan), ``[op, i, j, ...]`` an operation of the whitelist on earlier nodes.
+Loading builds each node with ``evaluate=False`` from its stored arguments (already canonical), so the result is
+the same expression, equal under ``==``; anything else in the data makes ``load`` return None. Nothing is
+executed: no eval, no sympify, no pickle.
+"""
+from __future__ import annotations
+
+from typing import Mapping, Sequence
+
+import sympy as sp
+
+OPERATIONS = {"Add": sp.Add, "Mul": sp.Mul, "Pow": sp.Pow, "sin": sp.sin, "cos": sp.cos, "tan": sp.tan,
+              "asin": sp.asin, "acos": sp.acos, "atan": sp.atan, "atan2": sp.atan2, "sinh": sp.sinh,
+              "cosh": sp.cosh, "tanh": sp.tanh, "exp": sp.exp, "log": sp.log, "Abs": sp.Abs, "sign": sp.sign,
+              "Min": sp.Min, "Max": sp.Max, "Heaviside": sp.Heaviside}
+CONSTANTS = {"pi": sp.pi, "E": sp.E, "I": sp.I, "oo": sp.oo, "-oo": -sp.oo, "zoo": sp.zoo, "nan": sp.nan}
+_NAMES = {v: k for k, v in OPERATIONS.items()}
+
+
+class Unsupported(Exception):
+    """A node the whitelist does not cover: the expressions are not cached (derived again next time)."""
+
+
+def dump(exprs: Sequence[sp.Expr], symbols: Mapping[str, sp.Symbol]) -> dict:
+    """{"nodes": [...], "roots": [...]} of ``exprs``; Unsupported if a node is not on the whitelist or a symbol is
+    not one of ``symbols`` (by name and identity)."""
+    nodes: list[list] = []
+    index: dict[sp.Basic, int] = {}
+
+    def visit(e: sp.Basic) -> int:
+        if e in index:
+            return index[e]
+        stack = [(e, False)]
+        while stack:  # iterative post-order: deep sums of products must not exhaust Python's stack
+            node, ready = stack.pop()
+            if node in index:
+                continue
+            if ready or not node.args or isinstance(node, (sp.Symbol, sp.Number)):
+                index[node] = len(nodes)
+                nodes.append(_encode(node, index, symbols))
+                continue
+            stack.append((node, True))
+            stack.extend((a, False) for a in reversed(node.args) if a not in index)
+        return index[e]
+
+    roots = [visit(sp.sympify(e)) for e in exprs]
+    return {"nodes": nodes, "roots": roots}
+
+
+def _encode(e: sp.Basic, index: dict, symbols: Mapping[str, sp.Symbol]) -> list:
+    if isinstance(e, sp.Symbol):
+        if symbols.get(e.name) is not e and symbols.get(e.name) != e:
+            raise Unsupported(f"symbol {e.name!r} is not one of the model's")
+        return ["S", e.name]
+    for name, value in CONSTANTS.items():
+        if not e.args and e == value or e is value:
+            return ["C", name]
+    if isinstance(e, sp.Integer):
+        return ["I", str(int(e))]
+    if isinstance(e, sp.Rational):
+        return ["R", str(e.p), str(e.q)]
+    if isinstance(e, sp.Float):
+        sign, man, exp, bits = e._mpf_
+        return ["F", int(sign), str(man), int(exp), int(bits), int(e._prec)]
+    name = _NAMES.get(e.func)
+    if name is None or e.func is not OPERATIONS[name]:
+        raise Unsupported(f"{type(e).__name__} is not on the whitelist")
+    return [name, *(index[a] for a in e.args)]
+
+
+def load(data: object, symbols: Mapping[str, sp.Symbol]) -> list[sp.Expr] | None:
+    """The expressions of ``dump``'s data, or None when the data is malformed or names anything outside the
+    whitelist (an unknown operation, a symbol the model does not have, a forward reference)."""
+    try:
+        nodes, roots = data["nodes"], data["roots"]  # type: ignore[index]
+        built: list[sp.Basic] = []
+        for node in nodes:
+            built.append(_decode(node, built, symbols))
+        return [built[int(i)] for i in roots]
+    except (KeyError, TypeError, ValueError, IndexError, AttributeError):
+        return None
+
+
+def _decode(node: list, built: list, symbols: Mapping[str, sp.Symbol]) -> sp.Basic:
+    kind = node[0]
+    if kind == "S":
+        return symbols[str(node[1])]  # KeyError: a symbol the model does not have
+    if kind == "C":
+        return CONSTANTS[str(node[1])]
+    if kind == "I":
+        return sp.Integer(int(str(node[1]), 10))
+    if kind == "R":
+        return sp.Rational(int(str(node[1]), 10), int(str(node[2]), 10))
+    if kind == "F":
+        sign, man, exp, bits, prec = node[1:]
+        return sp.Float._new((int(sign), int(str(man), 10), int(exp), int(bits)), int(prec))
+    op = OPERATIONS[str(kind)]
+    args = []
+    for i in node[1:]:
+        i = int(i)
+        if not 0 <= i < len(built):
+            raise ValueError("forward reference")
+        args.append(built[i])
+    return op(*args, evaluate=False)
