@@ -192,6 +192,8 @@ def derive(
     method: Method = typer.Option(Method.lagrange, "--method", "-m", help="Formulation to print."),
     check: bool = typer.Option(False, "--check", help="Verify that Lagrange and Kane give the same M and f."),
     simplify: bool = typer.Option(False, "--simplify", help="Simplify every expression before printing (slow)."),
+    raw: bool = typer.Option(False, "--raw", help="Print the expressions as derived, without the quick clean-up "
+                                                 "(trigonometric identities, signs) of text, LaTeX and Markdown."),
     fmt: DeriveFormat = typer.Option(DeriveFormat.text, "--format", "-f", help="Output format."),
     set_: Optional[List[str]] = SetOption,
     output: Optional[Path] = OutputOption,
@@ -215,7 +217,7 @@ def derive(
                               "max_relative_difference": result.max_rel_diff, "symbolic": result.symbolic}
         if simplify:
             eq = simplified(eq)
-        text = render(eq, model.name, fmt.value, extra)
+        text = render(eq, model.name, fmt.value, extra, raw=raw)
         if verdict is not None and fmt.value != "json":
             prefix = "% " if fmt.value == "latex" else ""
             text += f"{prefix}check: {verdict.summary()}\n"

@@ -8,6 +8,7 @@ import sympy as sp
 
 from mechsys.mechanics.model import Equations
 from mechsys.report.printing import to_latex, to_text
+from mechsys.report.readable import readable
 
 FORMATS = ("text", "markdown", "latex", "json")
 
@@ -19,7 +20,15 @@ def simplified(eq: Equations) -> Equations:
                      eq.Q.applyfunc(s), s(eq.T), s(eq.V), eq.A.applyfunc(s), eq.b.applyfunc(s), eq.constraint_names)
 
 
-def _lhs(eq: Equations, i: int, fmt: Callable[[sp.Expr], str], times: str, acc: Callable[[int], str]) -> str:
+def _paren(text: str, times: str) -> str:
+    return f"({text})" if times != " " else f"\\left({text}\\right)"
+
+
+def _lhs(eq: Equations, i: int, fmt: Callable[[sp.Expr], str], times: str, acc: Callable[[int], str],
+         tidy: bool = False) -> str:
+    if tidy:
+        pieces = _pieces([(eq.M[i, j], acc(j)) for j in range(len(eq.q)) if eq.M[i, j] != 0], fmt, times)
+        return _leading(pieces) or "0"
     terms = []
     for j in range(len(eq.q)):
         mij = eq.M[i, j]
@@ -27,13 +36,48 @@ def _lhs(eq: Equations, i: int, fmt: Callable[[sp.Expr], str], times: str, acc: 
             continue
         coeff = fmt(mij)
         if mij.is_Add:
-            coeff = f"({coeff})" if times != " " else f"\\left({coeff}\\right)"
+            coeff = _paren(coeff, times)
         terms.append(acc(j) if mij == 1 else f"{coeff}{times}{acc(j)}")
     return " + ".join(terms) if terms else "0"
 
 
+def _negative(coeff: sp.Expr) -> bool:
+    """Whether the coefficient reads better negated: a leading minus, or (a sum) more negative terms than not."""
+    terms = sp.Add.make_args(coeff)
+    return 2 * sum(1 for t in terms if t.as_coeff_Mul()[0].is_negative) > len(terms)
+
+
+def _pieces(terms: list[tuple[sp.Expr, str]], fmt: Callable[[sp.Expr], str], times: str,
+            symbol_first: bool = False) -> list[tuple[bool, str]]:
+    """(minus, text) of each coefficient*symbol term, the sign taken out of the coefficient; a unit coefficient
+    is left out, a sum is parenthesized."""
+    out = []
+    for coeff, symbol in terms:
+        minus = _negative(coeff)
+        c = -coeff if minus else coeff
+        text = _paren(fmt(c), times) if c.is_Add else fmt(c)
+        body = symbol if c == 1 else (f"{symbol}{times}{text}" if symbol_first else f"{text}{times}{symbol}")
+        out.append((minus, body))
+    return out
+
+
+def _leading(pieces: list[tuple[bool, str]]) -> str:
+    """'a - b + c' (no '+ -'): the first term with a bare minus, the others joined by their signs."""
+    if not pieces:
+        return ""
+    first = ("-" if pieces[0][0] else "") + pieces[0][1]
+    return first + _following(pieces[1:])
+
+
+def _following(pieces: list[tuple[bool, str]]) -> str:
+    return "".join(f" {'-' if minus else '+'} {body}" for minus, body in pieces)
+
+
 def _multiplier_terms(eq: Equations, i: int, fmt: Callable[[sp.Expr], str], lam: Callable[[int], str],
-                      times: str) -> str:
+                      times: str, tidy: bool = False) -> str:
+    if tidy:
+        terms = [(eq.A[k, i], lam(k)) for k in range(eq.A.shape[0]) if eq.A[k, i] != 0]
+        return _following(_pieces(terms, fmt, times, symbol_first=True))
     out = ""
     for k in range(eq.A.shape[0]):
         aki = eq.A[k, i]
@@ -42,7 +86,15 @@ def _multiplier_terms(eq: Equations, i: int, fmt: Callable[[sp.Expr], str], lam:
     return out
 
 
-def render_text(eq: Equations, name: str) -> str:
+def _text_constraint_row(eq: Equations, k: int, tidy: bool) -> str:
+    acc = [f"der(der({c}))" for c in eq.coordinates]
+    if tidy:
+        return _leading(_pieces([(a, acc[j]) for j, a in enumerate(eq.A.row(k)) if a != 0], to_text, "*")) or "0"
+    return " + ".join(f"({to_text(a)})*{acc[j]}" for j, a in enumerate(eq.A.row(k)) if a != 0) or "0"
+
+
+def render_text(eq: Equations, name: str, tidy: bool = False) -> str:
+    """The text form; tidy: signs joined as 'a - b' (never 'a + -b'), unit coefficients left out."""
     lines = [f"{name}: equations of motion ({eq.method}), M q'' = f" + (" + A^T lambda" if eq.A.shape[0] else "")]
     lines.append("coordinates: " + (", ".join(eq.coordinates) or "(none)"))
     lines.append(f"T = {to_text(eq.T)}")
@@ -52,49 +104,51 @@ def render_text(eq: Equations, name: str) -> str:
         lines.append(f"  {c}: {to_text(qi)}")
     lines.append("equations:")
     for i, c in enumerate(eq.coordinates):
-        lhs = _lhs(eq, i, to_text, "*", lambda j: f"der(der({eq.coordinates[j]}))")
-        lam = _multiplier_terms(eq, i, to_text, lambda k: f"lambda{k + 1}", "*")
+        lhs = _lhs(eq, i, to_text, "*", lambda j: f"der(der({eq.coordinates[j]}))", tidy)
+        lam = _multiplier_terms(eq, i, to_text, lambda k: f"lambda{k + 1}", "*", tidy)
         lines.append(f"  {c}: {lhs} = {to_text(eq.f[i])}{lam}")
     if eq.A.shape[0]:
         lines.append("constraints (acceleration level, A q'' = b):")
         for k, cname in enumerate(eq.constraint_names):
-            row = " + ".join(f"({to_text(a)})*der(der({eq.coordinates[j]}))" for j, a in enumerate(eq.A.row(k))
-                             if a != 0) or "0"
-            lines.append(f"  lambda{k + 1} [{cname}]: {row} = {to_text(eq.b[k])}")
+            lines.append(f"  lambda{k + 1} [{cname}]: {_text_constraint_row(eq, k, tidy)} = {to_text(eq.b[k])}")
     return "\n".join(lines) + "\n"
 
 
-def _latex_lines(eq: Equations) -> list[tuple[str, str]]:
+def _latex_lines(eq: Equations, tidy: bool = False) -> list[tuple[str, str]]:
     rows = [("T", f"T &= {to_latex(eq.T)}"), ("V", f"V &= {to_latex(eq.V)}")]
     for i, c in enumerate(eq.coordinates):
         rows.append((f"Q_{c}", f"Q_{{{to_latex(eq.q[i])}}} &= {to_latex(eq.Q[i])}"))
-    return rows + latex_equations(eq)
+    return rows + latex_equations(eq, tidy)
 
 
-def latex_equations(eq: Equations) -> list[tuple[str, str]]:
+def latex_equations(eq: Equations, tidy: bool = False) -> list[tuple[str, str]]:
     """(label, ``lhs &= rhs``) of each equation of motion (label: its coordinate) and constraint row (its name),
-    in LaTeX with dotted rates: the rows of ``derive -f latex`` after T, V and Q."""
+    in LaTeX with dotted rates: the rows of ``derive -f latex`` after T, V and Q (tidy: signs as in
+    render_text)."""
     acc = {j: to_latex(a) for j, a in enumerate(eq.a)}
     rows = []
     for i, c in enumerate(eq.coordinates):
-        lhs = _lhs(eq, i, to_latex, " ", lambda j: acc[j])
-        lam = _multiplier_terms(eq, i, to_latex, lambda k: f"\\lambda_{{{k + 1}}}", " ")
+        lhs = _lhs(eq, i, to_latex, " ", lambda j: acc[j], tidy)
+        lam = _multiplier_terms(eq, i, to_latex, lambda k: f"\\lambda_{{{k + 1}}}", " ", tidy)
         rows.append((c, f"{lhs} &= {to_latex(eq.f[i])}{lam}"))
     for k in range(eq.A.shape[0]):
-        row = " + ".join(f"\\left({to_latex(a)}\\right) {acc[j]}" for j, a in enumerate(eq.A.row(k)) if a != 0)
+        if tidy:
+            row = _leading(_pieces([(a, acc[j]) for j, a in enumerate(eq.A.row(k)) if a != 0], to_latex, " "))
+        else:
+            row = " + ".join(f"\\left({to_latex(a)}\\right) {acc[j]}" for j, a in enumerate(eq.A.row(k)) if a != 0)
         rows.append((eq.constraint_names[k], f"{row or '0'} &= {to_latex(eq.b[k])}"))
     return rows
 
 
-def render_latex(eq: Equations, name: str) -> str:
-    body = " \\\\\n".join(line for _, line in _latex_lines(eq))
+def render_latex(eq: Equations, name: str, tidy: bool = False) -> str:
+    body = " \\\\\n".join(line for _, line in _latex_lines(eq, tidy))
     return f"% {name}: equations of motion ({eq.method})\n\\begin{{align*}}\n{body}\n\\end{{align*}}\n"
 
 
-def render_markdown(eq: Equations, name: str) -> str:
+def render_markdown(eq: Equations, name: str, tidy: bool = False) -> str:
     out = [f"# {name}: equations of motion ({eq.method})", "",
            "Coordinates: " + (", ".join(f"`{c}`" for c in eq.coordinates) or "none"), ""]
-    for label, line in _latex_lines(eq):
+    for label, line in _latex_lines(eq, tidy):
         out += [f"**{label}**", "", "$$", line.replace("&=", "="), "$$", ""]
     return "\n".join(out)
 
@@ -119,10 +173,19 @@ def to_json_dict(eq: Equations, name: str) -> dict:
     return data
 
 
-def render(eq: Equations, name: str, fmt: str, extra: dict | None = None) -> str:
+def render(eq: Equations, name: str, fmt: str, extra: dict | None = None, raw: bool = False) -> str:
+    """The equations in a format. Text, Markdown and LaTeX print the readable form (report/readable.py: exact
+    clean-up within a time budget, a one-line note when it runs out) unless raw; JSON is always as derived."""
     if fmt == "json":
         data = to_json_dict(eq, name)
         data.update(extra or {})
         return json.dumps(data, indent=2) + "\n"
-    text = {"text": render_text, "markdown": render_markdown, "latex": render_latex}[fmt](eq, name)
+    renderer = {"text": render_text, "markdown": render_markdown, "latex": render_latex}[fmt]
+    if raw:
+        return renderer(eq, name)
+    cleanup = readable(eq)
+    text = renderer(cleanup.equations, name, tidy=True)
+    note = cleanup.note()
+    if note:
+        text += {"text": f"{note}\n", "markdown": f"\n{note}\n", "latex": f"% {note}\n"}[fmt]
     return text

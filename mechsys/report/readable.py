@@ -1,0 +1,443 @@
+"""Cheap, exact clean-up of printed equations: Pythagorean identities, unit-vector norms, tidy signs."""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+from functools import cmp_to_key, reduce
+from itertools import product
+from typing import Callable, Iterator, TypeVar
+
+import sympy as sp
+from sympy.core.add import _addsort
+from sympy.core.mul import _keep_coeff
+
+from mechsys.mechanics.model import Equations
+
+#: Work one command may spend on the clean-up, in node visits; what is left is printed as derived (and reported).
+#: A count, not a time: what is printed must not depend on the machine or its load. The bicycle's whole clean-up
+#: (Lagrange) is 8,718 visits, 1-2 s; the rolling disk's 938 (0.15 s).
+BUDGET_VISITS = 20_000
+
+# Expanding a product to find a unit-vector norm is tried only on small factors and sums (cheap and bounded).
+_NORM_FACTOR_TERMS = 4     # terms of a sum factor that may be multiplied out
+_NORM_FACTOR_NODES = 80    # tree nodes of such a factor
+_NORM_PRODUCTS = 16        # terms one multiplied-out term may produce
+_NORM_SUM_TERMS = 64       # terms of a sum whose products are tried
+_NORM_CANDIDATES = 6       # products tried in one sum
+
+Value = TypeVar("Value")
+_TRIG = (sp.sin, sp.cos)
+_OTHER = {sp.sin: sp.cos, sp.cos: sp.sin}
+_UNDEFINED = (sp.zoo, sp.nan, sp.oo, -sp.oo)
+_BY_REST = cmp_to_key(lambda a, b: a[1].compare(b[1]))  # (coefficient, rest) pairs by rest, canonical order
+
+
+class OutOfTime(Exception):
+    """The clean-up budget is spent."""
+
+
+@dataclass(frozen=True)
+class Cleanup:
+    """The equations to print, and how many of their entries the budget left as derived or only partly cleaned
+    (identities and signs, no unit-vector norms)."""
+
+    equations: Equations
+    entries: int
+    left_as_derived: int
+    partly_cleaned: int
+    budget: int
+    spent: int = 0  # node visits used
+
+    def note(self) -> str | None:
+        """One line for the reader when the budget ran out, else None."""
+        if self.left_as_derived:
+            what = f"{self.left_as_derived} of {self.entries} entries left as derived"
+        elif self.partly_cleaned:
+            what = f"unit-vector norms not tried in {self.partly_cleaned} of {self.entries} entries"
+        else:
+            return None
+        return (f"readable form: clean-up stopped after {self.budget:,} node visits; {what}, use --simplify for a "
+                "full (slow) simplification or --raw for none")
+
+
+# ------------------------------------------------------------------------------------------------ traversal
+def _fold(expr: sp.Basic, combine: Callable[[sp.Basic, tuple], Value], memo: dict,
+          tick: Callable[[], None]) -> Value:
+    """Post-order fold without recursion (deep trees are fine): combine(node, values of its args), memoized."""
+    stack = [expr]
+    while stack:
+        node = stack[-1]
+        if node in memo:
+            stack.pop()
+            continue
+        pending = [a for a in node.args if a not in memo]
+        if pending:
+            stack.extend(pending)
+            continue
+        stack.pop()
+        tick()
+        memo[node] = combine(node, tuple(memo[a] for a in node.args))
+    return memo[expr]
+
+
+def _no_tick() -> None:
+    return None
+
+
+# ----------------------------------------------------------------------------------------- Pythagoras
+def _factors(term: sp.Expr) -> tuple[sp.Expr, tuple[sp.Expr, ...]]:
+    """(numeric coefficient, other factors) of one term of a sum."""
+    coeff, rest = term.as_coeff_Mul()
+    return coeff, (() if rest == 1 else sp.Mul.make_args(rest))
+
+
+def _trig_square(factor: sp.Expr) -> tuple[type, sp.Expr, sp.Expr] | None:
+    """(sin or cos, argument, the factor divided by its square) for sin(x)**n or cos(x)**n with integer n >= 2."""
+    if not (factor.is_Pow and isinstance(factor.base, _TRIG) and factor.exp.is_Integer and factor.exp >= 2):
+        return None
+    return factor.base.func, factor.base.args[0], factor.base ** (factor.exp - 2)
+
+
+def _reductions(factors: tuple[sp.Expr, ...]) -> Iterator[tuple[type, sp.Expr, frozenset]]:
+    """For each sin(x)**n / cos(x)**n factor: (function, x, the other factors once sin(x)**2 / cos(x)**2 is
+    taken out), as a set (a product's factors have distinct bases)."""
+    for k, f in enumerate(factors):
+        trig = _trig_square(f)
+        if trig is None:
+            continue
+        func, arg, rest = trig
+        others = factors[:k] + factors[k + 1:] + ((rest,) if rest != 1 else ())
+        yield func, arg, frozenset(others)
+
+
+def _pair_squares(terms: list[sp.Expr]) -> list[sp.Expr] | None:
+    """c*R*sin(x)**2 + c*R*cos(x)**2 -> c*R for every disjoint pair of terms; None when there is none."""
+    slots: dict[tuple, dict[type, int]] = {}
+    for i, term in enumerate(terms):
+        coeff, factors = _factors(term)
+        for func, arg, others in _reductions(factors):
+            slots.setdefault((arg, coeff, others), {}).setdefault(func, i)
+    used: set[int] = set()
+    new = []
+    for (_, coeff, others), slot in slots.items():
+        i, j = slot.get(sp.sin), slot.get(sp.cos)
+        if i is None or j is None or i in used or j in used:
+            continue
+        used |= {i, j}
+        new.append(sp.Mul(coeff, *others))
+    return [t for k, t in enumerate(terms) if k not in used] + new if new else None
+
+
+def _pair_complements(terms: list[sp.Expr]) -> list[sp.Expr] | None:
+    """c*R - c*R*sin(x)**2 -> c*R*cos(x)**2 (and sin for cos), once per term; None when there is none."""
+    plain = {}
+    for i, term in enumerate(terms):
+        coeff, factors = _factors(term)
+        plain.setdefault((coeff, frozenset(factors)), i)
+    used: set[int] = set()
+    new = []
+    for i, term in enumerate(terms):
+        coeff, factors = _factors(term)
+        for func, arg, others in _reductions(factors):
+            j = plain.get((-coeff, others))
+            if j is None or i in used or j in used or i == j:
+                continue
+            used |= {i, j}
+            new.append(sp.Mul(-coeff, *others, _OTHER[func](arg) ** 2))
+    return [t for k, t in enumerate(terms) if k not in used] + new if new else None
+
+
+def pythagoras(add: sp.Expr) -> sp.Expr:
+    """The sum with sin(x)**2 + cos(x)**2 = 1 applied wherever two terms share every other factor."""
+    terms = list(sp.Add.make_args(add))
+    changed = False
+    while True:
+        step = _pair_squares(terms) or _pair_complements(terms)
+        if step is None:
+            break
+        changed = True
+        terms = list(sp.Add.make_args(sp.Add(*step)))
+    return sp.Add(*terms) if changed else add
+
+
+# ---------------------------------------------------------------------------------------------------- signs
+def _content(coeffs: list[sp.Expr]) -> sp.Expr:
+    """The positive rational content of rational coefficients (their gcd over the lcm of their denominators),
+    or 1 when one of them is not rational."""
+    if not all(c.is_Rational for c in coeffs):
+        return sp.Integer(1)
+    return sp.Rational(reduce(math.gcd, (abs(c.p) for c in coeffs)), reduce(math.lcm, (c.q for c in coeffs)))
+
+
+def _tidy_factor(factor: sp.Expr) -> tuple[sp.Expr, sp.Expr] | None:
+    """(number, factor') with number*factor' == factor, where a sum raised to an integer power loses its numeric
+    content and its minus signs when most of its terms have one (on a tie: when the term first in sympy's
+    canonical order of the non-numeric parts has one, the same term for the sum and its negative):
+    (-2*a - 2*b)**2 -> (4, (a + b)**2). None when there is nothing to do."""
+    base, exp = factor.as_base_exp()
+    if not (base.is_Add and exp.is_Integer):
+        return None
+    split = [t.as_coeff_Mul() for t in base.args]
+    coeffs = [c for c, _ in split]
+    minus = 2 * sum(1 for c in coeffs if c.is_negative) - len(coeffs)
+    negative = minus > 0 or minus == 0 and min(split, key=_BY_REST)[0].is_negative
+    content = _content(coeffs)
+    if content == 1 and not negative:
+        return None
+    if negative:
+        content = -content
+    return content ** exp, _divided(base, split, content) ** exp
+
+
+def _divided(base: sp.Expr, split: list[tuple[sp.Expr, sp.Expr]], number: sp.Expr) -> sp.Expr:
+    """The sum divided by a number that divides its rational coefficients: no term merges with another, so the
+    terms are only re-sorted, as sympy's Add.primitive does (a full Add() costs far more on big sums)."""
+    terms = [_keep_coeff(c / number, rest) for c, rest in split]
+    first = terms.pop(0) if terms[0].is_Number else None
+    _addsort(terms)
+    return base._new_rawargs(*([first] if first is not None else []), *terms)
+
+
+def tidy_signs(expr: sp.Expr) -> sp.Expr:
+    """A product or power with the numbers and minus signs of its sum factors moved to its coefficient."""
+    coeff = sp.Integer(1)
+    factors = []
+    changed = False
+    for f in sp.Mul.make_args(expr):
+        tidy = _tidy_factor(f)
+        if tidy is None:
+            factors.append(f)
+            continue
+        changed = True
+        coeff *= tidy[0]
+        factors.append(tidy[1])
+    return sp.Mul(coeff, *factors) if changed else expr
+
+
+# ---------------------------------------------------------------------------------------- unit-vector norms
+def _direct_trig(term: sp.Expr, sins: set, coss: set) -> None:
+    """Add the arguments of the sin and cos factors (any power) of a product to sins and coss."""
+    for f in sp.Mul.make_args(term):
+        base = f.base if f.is_Pow else f
+        if isinstance(base, sp.sin):
+            sins.add(base.args[0])
+        elif isinstance(base, sp.cos):
+            coss.add(base.args[0])
+
+
+def _may_pair(terms: tuple, expanded: set) -> bool:
+    """Whether multiplying out can give sin(x)**2 and cos(x)**2 of one x: both must already be factors of a term
+    or of a term of a sum factor (a cheap necessary condition that avoids building the products)."""
+    sins: set = set()
+    coss: set = set()
+    for term in terms:
+        for f in sp.Mul.make_args(term):
+            base = f.base if f.is_Pow else f
+            for part in (base.args if term in expanded and base.is_Add else (f,)):
+                _direct_trig(part, sins, coss)
+    return not sins.isdisjoint(coss)
+
+
+Monomial = tuple[sp.Expr, dict]  # (numeric coefficient, {base: exponent})
+
+
+def _monomial(term: sp.Expr) -> Monomial:
+    coeff, factors = _factors(term)
+    powers: dict = {}
+    for f in factors:
+        base, exp = f.as_base_exp()
+        powers[base] = powers.get(base, 0) + exp
+    return coeff, powers
+
+
+def _times(a: Monomial, b: Monomial) -> Monomial:
+    powers = dict(a[1])
+    for base, exp in b[1].items():
+        powers[base] = powers.get(base, 0) + exp
+    return a[0] * b[0], powers
+
+
+def _has_square_pair(monomials: list[Monomial]) -> bool:
+    """Whether two of the (collected) monomials are c*R*sin(x)**2 and c*R*cos(x)**2."""
+    collected: dict[frozenset, sp.Expr] = {}
+    for coeff, powers in monomials:
+        key = frozenset((b, e) for b, e in powers.items() if e != 0)
+        collected[key] = collected.get(key, 0) + coeff
+    seen: dict[tuple, set] = {}
+    for key, coeff in collected.items():
+        if coeff == 0:
+            continue
+        for base, exp in key:
+            if isinstance(base, _TRIG) and exp.is_Integer and exp >= 2:
+                rest = key - {(base, exp)} | ({(base, exp - 2)} if exp > 2 else set())
+                funcs = seen.setdefault((base.args[0], coeff, rest), set())
+                funcs.add(base.func)
+                if len(funcs) == 2:
+                    return True
+    return False
+
+
+@dataclass
+class _Work:
+    """The budget of one command's clean-up (node visits), shared by its passes."""
+
+    budget: int
+    spent: int = 0
+
+
+class _Cleaner:
+    """One clean-up pass over many expressions, sharing the work on common subexpressions, against a budget."""
+
+    def __init__(self, work: "_Work", norms: bool = True, settled: bool = False) -> None:
+        self.work = work
+        self.norms = norms
+        self.settled = settled  # the input already went through the identities and signs: redo them on change
+        self.memo: dict[sp.Basic, sp.Basic] = {}
+        self.sizes: dict[sp.Basic, int] = {}
+        self.products: dict[sp.Expr, sp.Expr] = {}
+
+    def tick(self) -> None:
+        self.work.spent += 1
+        if self.work.spent > self.work.budget:
+            raise OutOfTime
+
+    def size(self, expr: sp.Basic) -> int:
+        return _fold(expr, lambda node, args: 1 + sum(args), self.sizes, _no_tick)
+
+    def clean(self, expr: sp.Expr) -> sp.Expr:
+        return _fold(expr, self._node, self.memo, self.tick)
+
+    def _node(self, node: sp.Basic, args: tuple) -> sp.Basic:
+        """The node over its cleaned args, with the rules applied; the node as derived if that evaluated to an
+        infinity or nan (a division by an expression that the identities make zero: keep what was derived)."""
+        changed = args != node.args
+        new = node.func(*args) if changed else node
+        redo = changed or not self.settled
+        if new.is_Add:
+            new = pythagoras(new) if redo else new
+            new = self._norms(new) if self.norms else new
+        elif (new.is_Mul or new.is_Pow) and redo:
+            new = tidy_signs(new)
+        return node if new in _UNDEFINED and node not in _UNDEFINED else new
+
+    def _expandable(self, factor: sp.Expr) -> int:
+        """How many terms the factor contributes when multiplied out (1: it stays as it is)."""
+        if not (factor.is_Add or factor.is_Pow and factor.base.is_Add and factor.exp == 2):
+            return 1
+        base, exp = factor.as_base_exp()
+        if len(base.args) <= _NORM_FACTOR_TERMS and self.size(base) <= _NORM_FACTOR_NODES and base.has(*_TRIG):
+            return len(base.args) ** int(exp)
+        return 1
+
+    def _count(self, term: sp.Expr) -> int:
+        """How many terms the term gives when multiplied out over its small trigonometric sum factors."""
+        total = 1
+        for f in _factors(term)[1]:
+            total *= self._expandable(f)
+        return total
+
+    def _products(self, term: sp.Expr) -> sp.Expr:
+        """The term multiplied out over its small trigonometric sum factors (memoized)."""
+        if term not in self.products:
+            coeff, factors = _factors(term)
+            choices = []
+            for f in factors:
+                base, exp = f.as_base_exp()
+                choices += [base.args] * int(exp) if self._expandable(f) > 1 else [(f,)]
+            self.products[term] = sp.Add(*(sp.Mul(coeff, *pick) for pick in product(*choices)))
+        return self.products[term]
+
+    def _monomials(self, term: sp.Expr, expand: bool) -> list[Monomial]:
+        """The term as monomials, multiplied out if asked (plain Python: cheaper than building the sympy sum)."""
+        if not expand:
+            return [_monomial(term)]
+        out = [_monomial(_factors(term)[0])]
+        for f in _factors(term)[1]:
+            base, exp = f.as_base_exp()
+            parts = [_monomial(t) for t in base.args] if self._expandable(f) > 1 else [(sp.Integer(1), {base: exp})]
+            for _ in range(int(exp) if self._expandable(f) > 1 else 1):
+                out = [_times(m, p) for m in out for p in parts]
+        return out
+
+    def _norms(self, add: sp.Expr) -> sp.Expr:
+        """Multiply out the small trigonometric products of a sum when the identities then make it smaller:
+        (c*cos(y) - s*sin(y))**2 + (c*sin(y) + s*cos(y))**2 -> c**2 + s**2. Greedy: each product stays
+        multiplied out only if that does not make the result larger."""
+        if not add.is_Add or len(add.args) > _NORM_SUM_TERMS:
+            return add
+        candidates = [t for t in add.args if 1 < self._count(t) <= _NORM_PRODUCTS][:_NORM_CANDIDATES]
+        if not candidates or not _may_pair(add.args, set(candidates)):
+            return add
+        if not _has_square_pair([m for t in add.args for m in self._monomials(t, t in candidates)]):
+            return add
+        expanded = {t: self._products(t) for t in candidates}
+        chosen = set(expanded)
+        best = self._with(add, expanded, chosen)
+        if best is None:
+            return add
+        for term in list(chosen):
+            trial = self._with(add, expanded, chosen - {term})
+            if trial is not None and self.size(trial) <= self.size(best):
+                chosen, best = chosen - {term}, trial
+        return best if self.size(best) < self.size(add) else add
+
+    def _with(self, add: sp.Expr, expanded: dict, chosen: set) -> sp.Expr | None:
+        """The sum with the chosen terms multiplied out and the identities applied; None if none applies."""
+        if not chosen:
+            return None
+        self.tick()
+        summed = sp.Add(*(expanded[t] if t in chosen else t for t in add.args))
+        result = pythagoras(summed)
+        return None if result is summed else result
+
+
+# ------------------------------------------------------------------------------------------------ equations
+def _entries(eq: Equations) -> list[tuple[str, tuple]]:
+    """(field, index) of every printed expression, in the order derive prints them."""
+    n, k = eq.M.shape[0], eq.A.shape[0]
+    out: list[tuple[str, tuple]] = [("T", ()), ("V", ())] + [("Q", (i, 0)) for i in range(n)]
+    for i in range(n):
+        out += [("M", (i, j)) for j in range(eq.M.shape[1])] + [("f", (i, 0))]
+    for r in range(k):
+        out += [("A", (r, j)) for j in range(eq.A.shape[1])] + [("b", (r, 0))]
+    return out
+
+
+def _get(eq: Equations, name: str, index: tuple) -> sp.Expr:
+    value = getattr(eq, name)
+    return value[index] if index else value
+
+
+def _clean_entries(eq: Equations, entries: list[tuple[str, tuple]], cleaner: _Cleaner) -> tuple[Equations, int]:
+    """The equations with the entries cleaned in order until the budget is spent, and how many were not reached."""
+    values = {"M": eq.M.copy(), "f": eq.f.copy(), "Q": eq.Q.copy(), "A": eq.A.copy(), "b": eq.b.copy(),
+              "T": eq.T, "V": eq.V}
+    for done, (name, index) in enumerate(entries):
+        try:
+            cleaned = cleaner.clean(_get(eq, name, index))
+        except OutOfTime:
+            return replace(eq, **values), len(entries) - done
+        if index:
+            values[name][index] = cleaned
+        else:
+            values[name] = cleaned
+    return replace(eq, **values), 0
+
+
+def readable(eq: Equations, budget: int | None = None) -> Cleanup:
+    """The equations with every printed entry cleaned up exactly (the same functions of the same symbols) within
+    the budget (node visits, default BUDGET_VISITS): first the identities and signs on every entry in print
+    order, then with what is left the unit-vector norms; what the budget interrupts stays as it was.
+    Entries are the printed expressions that are not a single number or symbol."""
+    work = _Work(BUDGET_VISITS if budget is None else budget)
+    entries = [(name, index) for name, index in _entries(eq) if _get(eq, name, index).args]
+    cheap, left = _clean_entries(eq, entries, _Cleaner(work, norms=False))
+    if left:
+        return Cleanup(cheap, len(entries), left, 0, work.budget, work.spent)
+    full, partly = _clean_entries(cheap, entries, _Cleaner(work, settled=True))
+    return Cleanup(full, len(entries), 0, partly, work.budget, work.spent)
+
+
+def clean_expression(expr: sp.Expr, budget: int | None = None) -> sp.Expr:
+    """One expression cleaned up as `readable` does, in one pass (OutOfTime when the budget runs out)."""
+    return _Cleaner(_Work(BUDGET_VISITS if budget is None else budget)).clean(sp.sympify(expr))

@@ -1,0 +1,326 @@
+"""The readable form of `mechsys derive` (mechsys/report/readable.py): no Pythagorean leftovers and no `+ -` in
+what is printed, exactly the derived functions (mpmath at 30 digits, every bundled model), `--raw` and JSON as
+derived, the time budget and its note, and two models written here whose mass matrices are derived by hand."""
+from __future__ import annotations
+
+import itertools
+import json
+import random
+from pathlib import Path
+
+import mpmath
+import pytest
+import sympy as sp
+from typer.testing import CliRunner
+
+import mechsys
+from helpers import SYSTEMS_DIR, load_system
+from mechsys.cli import app
+from mechsys.mechanics.model import Equations
+from mechsys.report import readable as rd
+from mechsys.report.printing import to_text
+
+runner = CliRunner()
+TEXTBOOK = ("centrifuge", "gyrostabilizer", "indicator")
+FAST_MODELS = sorted(p.stem for p in SYSTEMS_DIR.glob("*.yaml") if p.stem != "bicycle")
+
+
+def derive(*args: object) -> str:
+    result = runner.invoke(app, ["derive", *(str(a) for a in args)])
+    assert result.exit_code == 0, result.output
+    return result.stdout
+
+
+def entries(eq: Equations) -> list[sp.Expr]:
+    """Every printed expression: T, V, Q, M, f, A, b."""
+    return [eq.T, eq.V, *eq.Q, *eq.M, *eq.f, *eq.A, *eq.b]
+
+
+# ------------------------------------------------------------------------------ an independent leftover check
+def pythagorean_leftovers(expr: sp.Expr) -> list[tuple[sp.Expr, sp.Expr]]:
+    """Pairs of terms of one sum that read c*R*sin(x)**n and c*R*sin(x)**(n-2)*cos(x)**2 (the same cofactor
+    c*R): found with sympy's own arithmetic on the expression tree, nothing parsed from text."""
+    found = []
+    for node in sp.preorder_traversal(expr):
+        if not node.is_Add:
+            continue
+        terms = set(node.args)
+        for term in node.args:
+            for f in sp.Mul.make_args(term):
+                if f.is_Pow and isinstance(f.base, sp.sin) and f.exp.is_Integer and f.exp >= 2:
+                    partner = term / f.base ** 2 * sp.cos(f.base.args[0]) ** 2
+                    if partner in terms:
+                        found.append((term, partner))
+    return found
+
+
+def test_the_leftover_check_finds_what_the_derivation_leaves():
+    """The check can fail: the gyrostabilizer as derived has I3*cos(beta)**2*(sin(Omega*t)**2 + cos(Omega*t)**2),
+    and a hand-made sum of both kinds is caught."""
+    raw = load_system("gyrostabilizer").equations("lagrange")
+    assert any(pythagorean_leftovers(e) for e in entries(raw))
+    x, a, b = sp.symbols("x a b")
+    assert pythagorean_leftovers(a * b * sp.sin(x) ** 2 + a * b * sp.cos(x) ** 2 + 1)
+    assert pythagorean_leftovers(sp.sqrt(a * sp.cos(x) ** 2 * sp.sin(x) + a * sp.sin(x) ** 3))
+    assert not pythagorean_leftovers(a * sp.sin(x) ** 2 + b * sp.cos(x) ** 2)
+
+
+@pytest.mark.parametrize("method", ["lagrange", "kane"])
+@pytest.mark.parametrize("name", TEXTBOOK)
+def test_no_pythagorean_leftovers_in_the_printed_equations(name, method):
+    cleanup = rd.readable(load_system(name).equations(method))
+    assert cleanup.note() is None
+    for e in entries(cleanup.equations):
+        assert not pythagorean_leftovers(e), to_text(e)
+
+
+@pytest.mark.parametrize("fmt", ["text", "latex", "markdown"])
+@pytest.mark.parametrize("name", TEXTBOOK + ("rolling_disk",))
+def test_no_plus_minus_in_the_printed_equations(name, fmt):
+    text = derive(SYSTEMS_DIR / f"{name}.yaml", "-f", fmt)
+    assert "+ -" not in text and "readable form" not in text
+    if name == "rolling_disk":  # the form as derived had it (a negative mass-matrix entry)
+        assert "+ -" in derive(SYSTEMS_DIR / f"{name}.yaml", "-f", fmt, "--raw")
+
+
+def test_the_headline_leftovers_are_gone():
+    """The issue's examples: the gyrostabilizer's I3*cos(Omega*t)**2 + I3*sin(Omega*t)**2 and the rolling disk's
+    unit-vector norms (its constraint rows read der(der(x)) - r*cos(yaw)*der(der(spin)))."""
+    gyro = derive(SYSTEMS_DIR / "gyrostabilizer.yaml")
+    assert "sin(Omega*t)**2" in derive(SYSTEMS_DIR / "gyrostabilizer.yaml", "--raw")
+    assert "sin(Omega*t)**2" not in gyro and "(I2x + I3)*der(der(beta))" in gyro
+    disk = derive(SYSTEMS_DIR / "rolling_disk.yaml")
+    assert "lambda1 [no_slip.x]: der(der(x)) - r*cos(yaw)*der(der(spin)) = " in disk
+    assert "spin: m*r**2*sin(lean)/2*der(der(yaw)) + m*r**2/2*der(der(spin)) = " in disk
+    assert " - lambda1*r*cos(yaw) - lambda2*r*sin(yaw)\n" in disk
+
+
+# ------------------------------------------------------------------------------------------------ exactness
+def assert_exact(raw: list[sp.Expr], clean: list[sp.Expr], points: int = 3, seed: int = 7) -> None:
+    """raw and clean agree to 1e-12 relative at random values of every symbol (lambdified, mpmath at 30 digits,
+    so that an exact rewrite agrees to ~1e-28 and only a wrong one can miss)."""
+    symbols = sorted(set().union(*(e.free_symbols for e in raw + clean)), key=str)
+    f_raw = sp.lambdify(symbols, raw, modules="mpmath", cse=True)
+    f_clean = sp.lambdify(symbols, clean, modules="mpmath", cse=True)
+    rng = random.Random(seed)
+    with mpmath.workdps(30):
+        for _ in range(points):
+            values = [mpmath.mpf(rng.uniform(0.2, 1.4)) for _ in symbols]
+            for k, (a, b) in enumerate(zip(f_raw(*values), f_clean(*values))):
+                assert abs(a - b) <= 1e-12 * max(abs(a), abs(b)) + mpmath.mpf("1e-24"), (k, a, b, clean[k])
+
+
+def test_the_exactness_check_can_fail():
+    x, a = sp.symbols("x a")
+    with pytest.raises(AssertionError):
+        assert_exact([a * sp.sin(x) ** 2 + 2 * a * sp.cos(x) ** 2], [a])
+    assert_exact([a * sp.sin(x) ** 2 + a * sp.cos(x) ** 2], [a])
+
+
+@pytest.mark.parametrize("method", ["lagrange", "kane"])
+@pytest.mark.parametrize("name", FAST_MODELS)
+def test_the_readable_form_is_exact(name, method):
+    raw = load_system(name).equations(method)
+    cleanup = rd.readable(raw, budget=10**9)  # the whole clean-up
+    assert cleanup.note() is None
+    assert_exact(entries(raw), entries(cleanup.equations))
+
+
+@pytest.mark.slow
+def test_the_bicycle_within_the_default_budget_is_exact():
+    """The benchmark bicycle (15-45 s to derive): the default budget cleans every entry (no note; a count of node
+    visits, so on every machine) and what it prints is exact (the entries that changed, at one point)."""
+    raw = load_system("bicycle").equations("lagrange")
+    cleanup = rd.readable(raw)
+    assert cleanup.note() is None and cleanup.spent < rd.BUDGET_VISITS
+    changed = [(r, c) for r, c in zip(entries(raw), entries(cleanup.equations)) if r is not c]
+    assert changed
+    assert_exact([r for r, _ in changed], [c for _, c in changed], points=1)
+
+
+def test_unit_vector_norms_and_signs():
+    x, y, a, b, c = sp.symbols("x y a b c")
+    norm = (sp.cos(x) * sp.cos(y) - sp.sin(x) * sp.sin(y)) ** 2 + (sp.cos(x) * sp.sin(y) + sp.sin(x) * sp.cos(y)) ** 2
+    assert rd.clean_expression(sp.sqrt(norm)) == 1
+    assert rd.clean_expression(sp.sqrt(sp.cos(a) ** 2 + sp.sin(a) ** 2)) == 1
+    assert rd.clean_expression(c * (-a - b) * (-2 * a - 2 * b) / 2) == c * (a + b) ** 2
+    assert rd.clean_expression(c - c * sp.sin(x) ** 2) == c * sp.cos(x) ** 2
+    assert rd.clean_expression(a * sp.sin(x) ** 4 + a * sp.sin(x) ** 2 * sp.cos(x) ** 2) == a * sp.sin(x) ** 2
+    kept = a * sp.sin(x) ** 2 + b * sp.cos(x) ** 2  # different cofactors: nothing to do
+    assert rd.clean_expression(kept) == kept
+
+
+# -------------------------------------------------------------------------------------- --raw and JSON as before
+def _old_text(eq: Equations, name: str) -> str:
+    """derive's text form before the readable form (copied from mechsys/report/derive.py of commit babd36c)."""
+    acc = [f"der(der({c}))" for c in eq.coordinates]
+    lines = [f"{name}: equations of motion ({eq.method}), M q'' = f" + (" + A^T lambda" if eq.A.shape[0] else ""),
+             "coordinates: " + ", ".join(eq.coordinates), f"T = {to_text(eq.T)}", f"V = {to_text(eq.V)}",
+             "generalized forces Q (not derived from V):"]
+    lines += [f"  {c}: {to_text(qi)}" for c, qi in zip(eq.coordinates, eq.Q)]
+    lines.append("equations:")
+    for i, c in enumerate(eq.coordinates):
+        terms = [acc[j] if m == 1 else (f"({to_text(m)})" if m.is_Add else to_text(m)) + f"*{acc[j]}"
+                 for j, m in enumerate(eq.M.row(i)) if m != 0]
+        lam = "".join(f" + lambda{k + 1}*({to_text(a)})" for k, a in enumerate(eq.A.col(i)) if a != 0)
+        lines.append(f"  {c}: {' + '.join(terms) or '0'} = {to_text(eq.f[i])}{lam}")
+    if eq.A.shape[0]:
+        lines.append("constraints (acceleration level, A q'' = b):")
+        for k, cname in enumerate(eq.constraint_names):
+            row = " + ".join(f"({to_text(a)})*{acc[j]}" for j, a in enumerate(eq.A.row(k)) if a != 0) or "0"
+            lines.append(f"  lambda{k + 1} [{cname}]: {row} = {to_text(eq.b[k])}")
+    return "\n".join(lines) + "\n"
+
+
+@pytest.mark.parametrize("name", ["centrifuge", "gyrostabilizer", "rolling_disk", "four_bar"])
+def test_raw_prints_what_derive_printed_before(name):
+    """Byte for byte, including the rolling disk's `+ -` (a negative mass-matrix entry), multipliers and
+    constraint rows."""
+    eq = load_system(name).equations("lagrange")
+    assert derive(SYSTEMS_DIR / f"{name}.yaml", "--raw") == _old_text(eq, name)
+
+
+@pytest.mark.parametrize("name", ["gyrostabilizer", "rolling_disk"])
+def test_json_keeps_the_expressions_as_derived(name):
+    eq = load_system(name).equations("lagrange")
+    data = json.loads(derive(SYSTEMS_DIR / f"{name}.yaml", "-f", "json"))
+    assert data["mass_matrix"] == [[to_text(m) for m in eq.M.row(i)] for i in range(eq.M.shape[0])]
+    assert data["forcing"] == [to_text(f) for f in eq.f] and data["kinetic_energy"] == to_text(eq.T)
+    assert data["generalized_forces"] == [to_text(q) for q in eq.Q] and data["potential_energy"] == to_text(eq.V)
+    if eq.A.shape[0]:
+        assert data["constraints"]["rhs"] == [to_text(b) for b in eq.b]
+        assert data["constraints"]["jacobian"] == [[to_text(a) for a in eq.A.row(k)] for k in range(eq.A.shape[0])]
+    assert derive(SYSTEMS_DIR / f"{name}.yaml", "-f", "json", "--raw") == json.dumps(data, indent=2) + "\n"
+
+
+# ------------------------------------------------------------------------------------------------ the budget
+def test_a_spent_budget_prints_the_entries_as_derived_with_a_note(monkeypatch):
+    monkeypatch.setattr(rd, "BUDGET_VISITS", 0)
+    eq = load_system("gyrostabilizer").equations("lagrange")
+    text = derive(SYSTEMS_DIR / "gyrostabilizer.yaml")
+    n = sum(1 for e in entries(eq) if e.args)
+    assert text.endswith(f"readable form: clean-up stopped after 0 node visits; {n} of {n} entries left as derived, "
+                         "use "
+                         "--simplify for a full (slow) simplification or --raw for none\n")
+    assert f"\nT = {to_text(eq.T)}\n" in text and f" = {to_text(eq.f[0])}\n" in text
+    assert "sin(Omega*t)**2" in text
+    latex = derive(SYSTEMS_DIR / "gyrostabilizer.yaml", "-f", "latex")
+    assert latex.endswith(f"\\end{{align*}}\n% readable form: clean-up stopped after 0 node visits; {n} of {n} entries "
+                          "left as derived, use --simplify for a full (slow) simplification or --raw for none\n")
+    assert "readable form" not in derive(SYSTEMS_DIR / "gyrostabilizer.yaml", "-f", "json")
+
+
+def test_a_budget_spent_midway_leaves_the_rest_as_derived():
+    """At budgets from nothing to enough: the first entries cleaned, the note counts the rest, which are the
+    derived expressions themselves, and everything is exact."""
+    raw = load_system("gyrostabilizer").equations("lagrange")
+    printed = [e for e in entries(raw) if e.args]
+    needed = rd.readable(raw, budget=10**9).spent  # node visits of a whole clean-up
+    seen = set()
+    for budget in [0, *range(1, needed + 10, max(1, needed // 12))]:
+        cleanup = rd.readable(raw, budget=budget)
+        left = cleanup.left_as_derived
+        seen.add(left)
+        clean = [e for e, r in zip(entries(cleanup.equations), entries(raw)) if r.args]
+        assert clean[len(printed) - left:] == printed[len(printed) - left:]
+        assert (cleanup.note() is None) == (left == 0 and cleanup.partly_cleaned == 0)
+        if left:
+            assert f"; {left} of {len(printed)} entries left as derived," in cleanup.note()
+        assert_exact(entries(raw), entries(cleanup.equations), points=1)
+    assert 0 in seen and len(printed) in seen and len(seen) > 3
+
+
+def test_a_budget_spent_before_the_norms_keeps_identities_and_signs(monkeypatch):
+    def out_of_time(self, add):
+        raise rd.OutOfTime
+
+    monkeypatch.setattr(rd._Cleaner, "_norms", out_of_time)
+    raw = load_system("rolling_disk").equations("lagrange")
+    cleanup = rd.readable(raw)
+    n = sum(1 for e in entries(raw) if e.args)
+    assert cleanup.left_as_derived == 0 and cleanup.partly_cleaned == n
+    assert f"; unit-vector norms not tried in {n} of {n} entries, use --simplify" in cleanup.note()
+    assert_exact(entries(raw), entries(cleanup.equations), points=1)
+    text = derive(SYSTEMS_DIR / "rolling_disk.yaml")
+    assert "+ -" not in text and text.endswith(cleanup.note() + "\n")
+
+
+# -------------------------------------------------------------------------------- models written as a user would
+BALL_PENDULUM = """\
+name: ball_pendulum
+description: A ball on a massless rod hung from a gimbal (a spherical pendulum with a rigid bob)
+parameters: {m: 1.5, L: 0.8, a: 0.1, g: 9.81}
+coordinates:
+  phi: {initial: 0, rate: 1}       # azimuth about the vertical
+  theta: {initial: 0.5, rate: 0}   # polar angle from the downward vertical
+links:
+  gimbal:
+    joint: {type: revolute, parent: ground, axis: z, coordinate: phi}
+  ball:
+    joint: {type: revolute, parent: gimbal, axis: x, coordinate: theta}
+    mass: m
+    center_of_mass: [0, 0, -L]
+    shape: {sphere: {radius: a}}
+forces:
+  - {type: gravity, acceleration: [0, 0, -g]}
+"""
+
+FURUTA = """\
+name: furuta
+description: Furuta pendulum, a point mass on a rod hinged at the tip of an arm that turns about the vertical
+parameters: {J: 0.02, r: 0.2, m: 0.1, l: 0.3, g: 9.81}
+coordinates:
+  phi: {initial: 0, rate: 0}       # arm angle about the vertical
+  theta: {initial: 0.1, rate: 0}   # pendulum angle from the downward vertical, about the arm
+links:
+  arm:
+    joint: {type: revolute, parent: ground, axis: z, coordinate: phi}
+    inertia: {zz: J}
+  pendulum:
+    joint: {type: revolute, parent: arm, axis: x, coordinate: theta, origin: [r, 0, 0]}
+    particle: true
+    mass: m
+    center_of_mass: [0, 0, -l]
+forces:
+  - {type: gravity, acceleration: [0, 0, -g]}
+"""
+
+
+def _closed_forms() -> dict[str, tuple[str, sp.Matrix]]:
+    """Mass matrices derived by hand, coordinates (phi, theta).
+
+    Ball: the centre moves on a sphere of radius L, |v|^2 = L^2 (theta'^2 + sin^2(theta) phi'^2); the angular
+    velocity phi' e_z + theta' e_x' has |omega|^2 = phi'^2 + theta'^2 (e_z is perpendicular to e_x'), and the
+    central inertia is isotropic, I = 2/5 m a^2: M = diag(m L^2 sin^2(theta) + I, m L^2 + I).
+
+    Furuta: bob at p = (r cos(phi) - l sin(theta) sin(phi), r sin(phi) + l sin(theta) cos(phi), -l cos(theta));
+    |dp/dphi|^2 = r^2 + l^2 sin^2(theta), |dp/dtheta|^2 = l^2, dp/dphi . dp/dtheta = r l cos(theta), and the arm
+    adds J phi'^2: M = [[J + m (r^2 + l^2 sin^2(theta)), m r l cos(theta)], [m r l cos(theta), m l^2]]."""
+    m, L, a, J, r, l = sp.symbols("m L a J r l", real=True)
+    th = sp.Symbol("theta", real=True)
+    inertia = sp.Rational(2, 5) * m * a ** 2
+    ball = sp.diag(m * L ** 2 * sp.sin(th) ** 2 + inertia, m * L ** 2 + inertia)
+    furuta = sp.Matrix([[J + m * (r ** 2 + l ** 2 * sp.sin(th) ** 2), m * r * l * sp.cos(th)],
+                        [m * r * l * sp.cos(th), m * l ** 2]])
+    return {"ball_pendulum": (BALL_PENDULUM, ball), "furuta": (FURUTA, furuta)}
+
+
+@pytest.mark.parametrize("name", ["ball_pendulum", "furuta"])
+def test_printed_mass_matrix_of_a_user_model_is_the_closed_form(name, tmp_path: Path):
+    source, closed = _closed_forms()[name]
+    path = tmp_path / f"{name}.yaml"
+    path.write_text(source)
+    model = mechsys.load(path)
+    raw = model.equations("lagrange")
+    symbols = {s.name: s for e in entries(raw) for s in e.free_symbols}
+    closed = closed.xreplace({s: symbols[s.name] for s in closed.free_symbols})
+    clean = rd.readable(raw).equations.M
+    for i, j in itertools.product(range(2), range(2)):
+        assert sp.simplify(clean[i, j] - closed[i, j]) == 0, (i, j, clean[i, j])
+    assert clean == closed  # the clean-up prints the closed form itself ...
+    assert raw.M != closed  # ... which the derivation alone does not
+    text = derive(path)
+    for i, c in enumerate(("phi", "theta")):
+        entry = closed[i, i]
+        coeff = f"({to_text(entry)})" if entry.is_Add else to_text(entry)
+        assert f"{coeff}*der(der({c}))" in text
