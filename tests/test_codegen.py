@@ -710,3 +710,19 @@ def test_write_package_returns_the_files(tmp_path):
     model, _ = bundled("problem57")
     files = write_package(model, "matlab", tmp_path / "pkg")
     assert sorted(p.name for p in (tmp_path / "pkg").iterdir()) == files
+
+
+def test_constants_that_c99_lacks_are_defined(tmp_path):
+    """sqrt(2) in the equations: sympy's C printer writes M_SQRT2, which math.h defines only outside strict C99;
+    the package defines it (and the other POSIX constants) itself, so it compiles with -std=c99 -pedantic and
+    agrees with mechsys."""
+    text = (ROOT / "systems" / "double_pendulum.yaml").read_text()
+    text = text.replace("acceleration: [0, -g, 0]", "acceleration: [0, -g*sqrt(2)/2, 0]")
+    assert "sqrt(2)" in text
+    path = tmp_path / "roots.yaml"
+    path.write_text(text)
+    model = mechsys.load(path)
+    pkg = derive_package(model)
+    source = write(pkg, "c", tmp_path / "c")
+    assert "M_SQRT2" in "".join(p.read_text() for p in Path(source).glob("*.c"))  # what the printer writes
+    check_every_target(model, pkg, tmp_path)

@@ -16,6 +16,18 @@ _ARGUMENTS = {"t": "double t", "q": "const double *q", "u": "const double *u", "
               "lam": "const double *lam"}
 
 
+MATH_MACROS = (("M_E", "2.7182818284590452354"), ("M_LOG2E", "1.4426950408889634074"),
+               ("M_LOG10E", "0.43429448190325182765"), ("M_LN2", "0.69314718055994530942"),
+               ("M_LN10", "2.30258509299404568402"), ("M_PI", "3.14159265358979323846"),
+               ("M_PI_2", "1.57079632679489661923"), ("M_PI_4", "0.78539816339744830962"),
+               ("M_1_PI", "0.31830988618379067154"), ("M_2_PI", "0.63661977236758134308"),
+               ("M_2_SQRTPI", "1.12837916709551257390"), ("M_SQRT2", "1.41421356237309504880"),
+               ("M_SQRT1_2", "0.70710678118654752440"))
+"""The constants sympy's C99 printer writes (sqrt(2) -> M_SQRT2): POSIX, not C99, so the generated C defines
+them where math.h does not (a strict -std=c99 build)."""
+MATH_DEFINES = "\n".join(f"#ifndef {name}\n#define {name} {value}\n#endif" for name, value in MATH_MACROS)
+
+
 def _signature(pkg: Package, name: str, args: tuple[str, ...], result: str = "double *out") -> str:
     params = [_ARGUMENTS[a] if a != "p" else f"const {pkg.prefix}_params *p" for a in args]
     return f"{pkg.prefix}_{name}({', '.join(params + [result])})"
@@ -139,12 +151,7 @@ def _source(pkg: Package) -> str:
 
 #include "{prefix}.h"
 
-#ifndef M_PI
-#define M_PI 3.14159265358979323846
-#endif
-#ifndef M_E
-#define M_E 2.7182818284590452354
-#endif
+{MATH_DEFINES}
 
 #define {P}_NK ({P}_N + {P}_NC)
 

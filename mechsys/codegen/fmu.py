@@ -41,14 +41,6 @@ ENERGIES = (("kinetic_energy", "kinetic energy T"), ("potential_energy", "potent
             ("total_energy", "T + V"))
 RESIDUAL = ("constraint_residual", "max |Phi(q, t)| of the holonomic rows and |A u + a_t| of all rows (zero on "
                                    "the constraints; the FMU projects back when it exceeds 1e-12 x (1 + max |x|))")
-MATH_MACROS = (("M_E", "2.7182818284590452354"), ("M_LOG2E", "1.4426950408889634074"),
-               ("M_LOG10E", "0.43429448190325182765"), ("M_LN2", "0.69314718055994530942"),
-               ("M_LN10", "2.30258509299404568402"), ("M_PI", "3.14159265358979323846"),
-               ("M_PI_2", "1.57079632679489661923"), ("M_PI_4", "0.78539816339744830962"),
-               ("M_1_PI", "0.31830988618379067154"), ("M_2_PI", "0.63661977236758134308"),
-               ("M_2_SQRTPI", "1.12837916709551257390"), ("M_SQRT2", "1.41421356237309504880"),
-               ("M_SQRT1_2", "0.70710678118654752440"))
-"""The constants sympy's C99 printer writes (sqrt(2) -> M_SQRT2): POSIX, not C99, so fmu_model.h defines them."""
 TOLERANCE = 1e-10
 """The relative tolerance of the DefaultExperiment (FMPy's default would be 1e-5)."""
 
@@ -264,7 +256,7 @@ def model_header(layout: FmuLayout, guid: str) -> str:
              "come last, so that no model name (a struct field) is expanded. */",
              "#ifndef MSFMU_MODEL_H", "#define MSFMU_MODEL_H", "", "#include <stddef.h>", "",
              f'#include "{prefix}.h"', "",
-             *(f"#ifndef {name}\n#define {name} {value}\n#endif" for name, value in MATH_MACROS), "",
+             c.MATH_DEFINES, "",
              f"typedef {prefix}_params msfmu_parameters;", "",
              _c_array("size_t", "msfmu_parameter_offset", offsets),
              _c_array("int", "msfmu_parameter_settable", settable),
