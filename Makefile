@@ -38,6 +38,7 @@ check: $(STAMP)
 bench: $(STAMP)
 	$(BIN)/python -m pip install --quiet -e ".[dev,bench]"
 	$(BIN)/python benchmarks/derive_chain.py
+	$(BIN)/python benchmarks/derive_bicycle.py
 	$(BIN)/python benchmarks/backends.py
 	$(BIN)/python benchmarks/simulate_anchor.py
 	$(BIN)/mechsys bench systems/double_pendulum.yaml --t-end 5

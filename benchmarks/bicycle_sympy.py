@@ -44,8 +44,9 @@ def sort_eigenvalues(ev: np.ndarray) -> np.ndarray:
     return np.sort_complex(np.asarray(ev, dtype=complex))
 
 
-def build_and_linearize(stages: dict | None = None):
-    """sympy's test_kane3 bicycle, up to the linearized A matrix; returns (A, val_dict, v).
+def build_and_linearize(stages: dict | None = None, linearize: bool = True):
+    """sympy's test_kane3 bicycle, up to the linearized A matrix; returns (A, val_dict, v); with
+    ``linearize=False`` the KanesMethod object right after kanes_equations (benchmarks/derive_bicycle.py).
 
     A is the full A matrix of ``KM.linearize(A_and_B=True, ...)`` for the independent states
     [q1, q2, q5, u2, u3, u5] (yaw, lean, steer, lean rate, rear wheel rate, steer rate), still in the symbolic
@@ -124,6 +125,10 @@ def build_and_linearize(stages: dict | None = None):
     t1 = time.perf_counter()
     KM.kanes_equations(BL, FL)
     t2 = time.perf_counter()
+    if not linearize:
+        if stages is not None:
+            stages.update(model=t1 - t0, kanes_equations=t2 - t1)
+        return KM
 
     # Benchmark parameters converted to this model's geometry (verbatim from test_kane3).
     PaperRadRear = 0.3

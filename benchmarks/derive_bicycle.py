@@ -1,0 +1,89 @@
+#!/usr/bin/env python
+"""The benchmark bicycle's symbolic stage: what users run through mechsys, cold and with the cache, against plain
+sympy.physics.mechanics (KanesMethod + lambdify with CSE) on the same bicycle, in one run (issue 13).
+
+Every mechsys figure is the wall time of a whole `mechsys` process (imports included) on systems/bicycle.yaml,
+run twice in a row on one fresh, private cache folder: "cold" is the first command on the model (nothing
+cached), "cached" the same command again (derivations, cyclic decisions and compiled code read back). The
+baseline is timed in a fresh process too: sympy's own bicycle (test_kane3, benchmarks/bicycle_sympy.py) built,
+kanes_equations, then the mass matrix and forcing (full, with the kinematic rows) lambdified with cse=True.
+Prints one table with each time and its ratio to the baseline. Goals of the issue: cold derivation at least 2x
+faster than sympy; any second command on the model under 1 s.
+
+    .venv/bin/python benchmarks/derive_bicycle.py
+    .venv/bin/python benchmarks/derive_bicycle.py --commands derive-kane info   # a subset
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+BIKE = str(ROOT / "systems" / "bicycle.yaml")
+MECHSYS = str(Path(sys.executable).with_name("mechsys"))
+#: the commands users run on a model, with the options that keep them about the symbolic stage
+COMMANDS = {
+    "derive-kane": ["derive", BIKE, "--method", "kane", "-f", "json"],
+    "derive": ["derive", BIKE, "-f", "json"],
+    "info": ["info", BIKE, "-f", "json"],
+    "simulate": ["simulate", BIKE, "--t-end", "0.1", "-f", "json"],
+    "modes": ["modes", BIKE, "-f", "json"],
+}
+
+
+def sympy_baseline() -> float:
+    """Worker: seconds of build + kanes_equations + lambdify(cse) of M and forcing, after the imports."""
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    import sympy as sp
+
+    from bicycle_sympy import build_and_linearize
+
+    t0 = time.perf_counter()
+    km = build_and_linearize(linearize=False)
+    states = list(km.q) + list(km.u)
+    params = sorted((km.mass_matrix_full.free_symbols | km.forcing_full.free_symbols) - {sp.Symbol("t")},
+                    key=str)
+    sp.lambdify([states, params], [km.mass_matrix_full, km.forcing_full], cse=True)
+    return time.perf_counter() - t0
+
+
+def timed(argv: list[str], env: dict) -> tuple[float, int]:
+    t0 = time.perf_counter()
+    run = subprocess.run(argv, capture_output=True, text=True, env=env)
+    return time.perf_counter() - t0, run.returncode
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--commands", nargs="*", default=list(COMMANDS), choices=list(COMMANDS))
+    ap.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
+    args = ap.parse_args()
+    if args.worker:
+        print(sympy_baseline())
+        return 0
+    base_process, _ = timed([sys.executable, __file__, "--worker"], dict(os.environ))
+    base = float(subprocess.run([sys.executable, __file__, "--worker"], capture_output=True, text=True,
+                                check=True).stdout.strip().splitlines()[-1])
+    print(f"sympy KanesMethod + lambdify(cse), the same bicycle: {base:.2f} s of work "
+          f"({base_process:.2f} s as a process, imports included)\n")
+    print(f"{'mechsys command':<16} {'cold [s]':>9} {'/ sympy':>8} {'cached [s]':>11} {'/ sympy':>8}  exit")
+    failed = 0
+    for name in args.commands:
+        with tempfile.TemporaryDirectory() as folder:
+            env = {**os.environ, "MECHSYS_CACHE": folder}
+            cold, rc1 = timed([MECHSYS, *COMMANDS[name]], env)
+            warm, rc2 = timed([MECHSYS, *COMMANDS[name]], env)
+        failed += bool(rc1 or rc2)
+        print(f"{name:<16} {cold:9.2f} {cold / base:8.2f} {warm:11.2f} {warm / base:8.2f}  {rc1}/{rc2}")
+    print("\nratio < 1: faster than the sympy pipeline's work; each mechsys time is a whole process (about 1 s of "
+          "it imports)")
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
