@@ -237,3 +237,31 @@ def test_bad_constraint_quantities_are_one_line(tmp_path, capsys, expression, me
     assert run("info", str(model)) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "outputs.bad" in err and message in err, err
+
+
+def test_plot_draws_readable_panels_for_outputs_and_reactions(tmp_path, monkeypatch):
+    """A result with outputs, a driving force and reactions: one panel per vector (a reaction's forces apart from
+    its moments), the scalars together, at most MAX_EXTRA_PANELS of them (the rest named in the title)."""
+    from mechsys.report import simulation as report
+
+    names = ["t", "x", "der(x)", "T", "V", "E", "residual", "driving(th)", "H.x", "H.y", "H.z", "Hn",
+             *[f"reaction(rod).{c}" for c in ("Fx", "Fy", "Fz", "Mx", "My", "Mz")], "p_phi"]
+    groups = report.other_column_groups(names)
+    assert groups == [("driving forces", ["driving(th)"]), ("H", ["H.x", "H.y", "H.z"]), ("outputs", ["Hn", "p_phi"]),
+                      ("reaction(rod) (force)", ["reaction(rod).Fx", "reaction(rod).Fy", "reaction(rod).Fz"]),
+                      ("reaction(rod) (moment)", ["reaction(rod).Mx", "reaction(rod).My", "reaction(rod).Mz"])]
+    drawn = {}
+    monkeypatch.setattr("mechsys.report.files.write_figure",
+                        lambda path, draw, option="--plot": drawn.setdefault("fig", draw.__self__))
+    text = (ROOT / "docs/examples/slider_crank_driven.yaml").read_text() + "outputs:\n  pin: constraint_force(crank_pin)\n"
+    model = tmp_path / "sc.yaml"
+    model.write_text(text)
+    assert run("simulate", str(model), "--t-end", "0.5", "--reactions", "--plot", str(tmp_path / "p.png"),
+               "-o", str(tmp_path / "sc.csv")) == 0
+    titles = [ax.get_title() for ax in drawn.pop("fig").axes if ax.get_visible()]
+    assert titles[4:] == ["driving forces", "pin"]  # the run's own columns (reactions go to the file only)
+    assert run("plot", str(tmp_path / "sc.csv"), "-o", str(tmp_path / "q.png")) == 0  # the file: reactions too
+    titles = [ax.get_title() for ax in drawn["fig"].axes if ax.get_visible()]
+    assert titles[:2] == ["coordinates", "rates"] and "pin" in titles and "driving forces" in titles
+    assert "reaction(crank) (force)" in titles and len(titles) == 4 + report.MAX_EXTRA_PANELS
+    assert "more groups of columns are in the file" in drawn["fig"]._suptitle.get_text()

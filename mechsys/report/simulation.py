@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -267,8 +268,35 @@ def summary_payload(result) -> dict:
     return {"simulation summary": {row[0]: row[1] for row in table.rows}, "notes": list(table.notes)}
 
 
+#: Panels drawn for the columns that are not coordinates or rates (outputs, driving forces, reactions), two a row.
+MAX_EXTRA_PANELS = 6
+_PART = re.compile(r"^(.+)\.(x|y|z|Fx|Fy|Fz|Mx|My|Mz)$")
+
+
+def other_column_groups(names: list[str]) -> list[tuple[str, list[str]]]:
+    """The columns of a result other than t, coordinates, rates, T, V, E and residual, as (title, columns) panels:
+    the components of one vector together (H.x, H.y, H.z; a reaction's forces apart from its moments), driving
+    forces together, the other scalar columns together; in the order of the file."""
+    coords = {n for n in names if f"der({n})" in names}
+    skip = coords | {f"der({c})" for c in coords} | {"t", "T", "V", "E", "residual"}
+    groups: dict[str, list[str]] = {}
+    for n in names:
+        if n in skip:
+            continue
+        m = _PART.match(n)
+        if m:
+            key = f"{m.group(1)} ({'moment' if m.group(2).startswith('M') else 'force'})" \
+                if m.group(2) in ("Fx", "Fy", "Fz", "Mx", "My", "Mz") else m.group(1)
+        else:
+            key = "driving forces" if n.startswith("driving(") else "outputs"
+        groups.setdefault(key, []).append(n)
+    return list(groups.items())
+
+
 def plot_histories(names: list[str], data: np.ndarray, path: str, option: str = "--plot") -> None:
-    """Coordinates, rates, energy and a phase portrait of the first coordinate, written atomically."""
+    """Coordinates, rates, energy and a phase portrait of the first coordinate, then a row of panels for every
+    two groups of the other columns (outputs, driving forces, reactions; at most MAX_EXTRA_PANELS, the rest named
+    in the title), written atomically."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -280,7 +308,23 @@ def plot_histories(names: list[str], data: np.ndarray, path: str, option: str = 
         raise InputError("the result has no 't' column")
     t = data[:, names.index("t")]
     coords = [n for n in names if f"der({n})" in names]  # not outputs, reactions or driving forces
-    fig, axes = plt.subplots(2, 2, figsize=(10, 7))
+    groups = other_column_groups(names)
+    shown = groups[:MAX_EXTRA_PANELS]
+    rows = 2 + -(-len(shown) // 2)
+    fig, grid = plt.subplots(rows, 2, figsize=(10, 3.5 * rows), squeeze=False)
+    axes = grid[:2]
+    for ax, (title, columns) in zip(grid[2:].flat, shown):
+        for c in columns:
+            ax.plot(t, data[:, names.index(c)], label=c)
+        ax.set_title(title)
+        ax.grid(True, alpha=0.3)
+        ax.set_xlabel("t [s]")
+        if len(columns) > 1:
+            ax.legend(fontsize=8)
+    for ax in list(grid[2:].flat)[len(shown):]:
+        ax.set_visible(False)
+    if len(groups) > len(shown):
+        fig.suptitle(f"{len(groups) - len(shown)} more groups of columns are in the file, not drawn", fontsize=9)
     for c in coords:
         axes[0, 0].plot(t, data[:, names.index(c)], label=c)
         if f"der({c})" in names:
