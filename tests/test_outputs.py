@@ -211,7 +211,8 @@ def test_the_loop_closure_pin_force_equals_the_joint_reaction_of_the_same_pin(tm
     crank transmits to the rod at A), the loop closed at the slider instead: the same force at the same instant."""
     loop = tmp_path / "loop.yaml"
     loop.write_text((ROOT / "docs/examples/slider_crank_driven.yaml").read_text().replace("F4: 0 ", "F4: 4 ")
-                    + "outputs:\n  pin: constraint_force(crank_pin)\n  pin_x: multiplier(crank_pin.x)\n")
+                    + "outputs:\n  pin: constraint_force(crank_pin)\n  pin_x: multiplier(crank_pin.x)\n"
+                    + "  pin_rod: constraint_force(crank_pin, rod)\n  th3: theta3\n")
     tree = tmp_path / "tree.yaml"
     tree.write_text(PIN_IN_TREE)
     got = {}
@@ -221,6 +222,10 @@ def test_the_loop_closure_pin_force_equals_the_joint_reaction_of_the_same_pin(tm
     for axis, comp in (("x", "Fx"), ("y", "Fy")):
         assert got["loop"][f"pin.{axis}"] == pytest.approx(got["tree"][f"pin.{comp}"], rel=1e-8, abs=1e-9)
     assert got["loop"]["pin_x"] == got["loop"]["pin.x"]
+    c, s_ = math.cos(got["loop"]["th3"]), math.sin(got["loop"]["th3"])  # the rod's axes: turned by theta3 about z
+    fx, fy = got["loop"]["pin.x"], got["loop"]["pin.y"]
+    assert got["loop"]["pin_rod.x"] == pytest.approx(c * fx + s_ * fy, rel=1e-12, abs=1e-12)
+    assert got["loop"]["pin_rod.y"] == pytest.approx(-s_ * fx + c * fy, rel=1e-12, abs=1e-12)
     assert abs(got["tree"]["pin.Mz"]) < 1e-9  # a hinge carries no moment about its axis
     assert abs(got["loop"]["pin.y"]) > 1  # a real load, not a trivial agreement
 

@@ -11,8 +11,8 @@ the joint point), ``link.com``, ``link.NAME``, ``ground.NAME``. ``system`` means
 | angular_momentum(L or system [, P]) | sum of (r_G - r_P) x m v_G + R I omega, about P (default: the ground origin) |
 | kinetic_energy(L or system) | T |
 | momentum_of(q) | the generalized momentum dT/d(der(q)) |
-| reaction(L) | (Fx, Fy, Fz, Mx, My, Mz): the wrench L's joint transmits to L's subtree (analysis/reactions.py) |
-| constraint_force(C) | the force a point_on_point or rolling constraint C applies at its (first) point |
+| reaction(L[, K]) | (Fx, Fy, Fz, Mx, My, Mz): the wrench L's joint transmits to L's subtree (analysis/reactions.py); in the axes of link K if given |
+| constraint_force(C[, K]) | the force a point_on_point or rolling constraint C applies at its (first) point; in the axes of link K if given |
 | multiplier(ROW) | the Lagrange multiplier of one constraint row (M q'' = f + A^T lambda), e.g. crank_pin.x |
 
 Accelerations (acceleration(P), der(der(q))) contain the acceleration symbols of the coordinates; the
@@ -36,7 +36,7 @@ if TYPE_CHECKING:
 #: name -> (smallest, largest) number of arguments
 ARITY = {"position": (1, 1), "velocity": (1, 1), "acceleration": (1, 1), "angular_velocity": (1, 1),
          "momentum": (1, 1), "angular_momentum": (1, 2), "kinetic_energy": (1, 1), "momentum_of": (1, 1),
-         "reaction": (1, 1), "constraint_force": (1, 1), "multiplier": (1, 1)}
+         "reaction": (1, 2), "constraint_force": (1, 2), "multiplier": (1, 1)}
 WRENCH = ("Fx", "Fy", "Fz", "Mx", "My", "Mz")
 #: constraint types whose rows are the ground components of a force at their (first) point
 POINT_FORCES = ("point_on_point", "rolling")
@@ -65,7 +65,8 @@ class ModelQuantities(Quantities):
             raise ExpressionError(f"{name}() takes {count} argument(s), got {len(refs)}", pos)
         ref, at = refs[0]
         if name in ("reaction", "constraint_force", "multiplier"):
-            return self.constraint_quantity(name, ref, at)
+            value = self.constraint_quantity(name, ref, at)
+            return self.in_axes(value, *refs[1]) if len(refs) > 1 else value
         if name in ("position", "velocity", "acceleration"):
             frame, local = self.point(ref, at)
             if name == "position":
@@ -114,6 +115,13 @@ class ModelQuantities(Quantities):
             if row.startswith(ref + ".") and row[len(ref) + 1:] in ("x", "y", "z"):
                 force["xyz".index(row[-1])] = self.placeholder("multiplier", row, k)
         return force
+
+    def in_axes(self, value: sp.MatrixBase, link: str, at: int) -> sp.MatrixBase:
+        """A ground-axes force (or wrench: force and moment) in the axes of ``link``."""
+        R = self.frame_of(link, at).R
+        if len(value) == 6:
+            return sp.Matrix([*(R.T * value[:3, 0]), *(R.T * value[3:, 0])])
+        return R.T * value
 
     def placeholder(self, kind: str, what: str, index: int) -> sp.Symbol:
         """A symbol standing for a value the evaluation computes (a multiplier, a joint wrench component)."""
