@@ -4,6 +4,7 @@ changes on a fine grid, numpy's companion-matrix roots), and the refusals (exit 
 from __future__ import annotations
 
 import json
+import re
 import math
 from pathlib import Path
 
@@ -185,11 +186,14 @@ def test_the_exhaustive_example_of_the_docs_is_what_the_tool_prints():
     doc = (ROOT / "docs" / "equilibria.md").read_text()
     command = ("$ mechsys equilibria systems/centrifuge.yaml --set dM=50/7 --set Mo=3*50/7 --exhaustive -f json"
                "   (trimmed)\n")
-    shown = json.loads(doc.split(command, 1)[1].split("```", 1)[0])
+    block = doc.split(command, 1)[1].split("```", 1)[0]  # trimmed with `...` (tests/test_docs_examples.py)
+    summary = json.loads("{" + block[block.index('"exhaustive": {'):block.rindex("}")] + "}")
+    shown = [{"beta": float(b), "alpha": float(a), "stability": st} for b, a, st in re.findall(
+        r'"beta": (\S+?)\}, "rates": \{"alpha": (\S+?)\}.*?"stability": "([^"]+)"', block, re.S)]
     data = exhaustive(SYSTEMS / "centrifuge.yaml", "--set", "dM=50/7", "--set", "Mo=3*50/7")
-    assert data["exhaustive"] == shown["exhaustive"] and data["message"] == shown["message"]
-    assert len(data["equilibria"]) == len(shown["equilibria"])
-    for got, want in zip(data["equilibria"], shown["equilibria"]):
+    assert data["exhaustive"] == summary["exhaustive"] and data["message"] == ""
+    assert len(data["equilibria"]) == len(shown) == 2
+    for got, want in zip(data["equilibria"], shown):
         assert got["stability"] == want["stability"]
-        assert got["coordinates"] == pytest.approx(want["coordinates"], abs=1e-9)
-        assert got["rates"] == pytest.approx(want["rates"], abs=1e-9)
+        assert got["coordinates"]["beta"] == pytest.approx(want["beta"], abs=1e-9)
+        assert got["rates"]["alpha"] == pytest.approx(want["alpha"], abs=1e-9)

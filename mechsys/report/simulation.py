@@ -257,8 +257,8 @@ def summary_table(result) -> list[Table]:
     t.notes += result.warnings
     if not result.conservative:
         t.notes.append("energy balance: E(t) - E(0) - W(t) + (energy lost in impacts up to t), W the work of the "
-                       "non-conservative forces (damping, applied forces, drives, moving constraints; Simpson on "
-                       "the output grid); relative to max(|E(0)|, max T, max |W|)")
+                       "non-conservative forces (damping, applied forces, drives, moving constraints; a fourth-order "
+                       "quadrature on the output grid); relative to max(|E(0)|, max T, max |W|)")
     return [t]
 
 
