@@ -1,8 +1,8 @@
 """Bounds of the expression parser and of parameter resolution (issue 10).
 
 Every expression that would make sympy compute an astronomically long exact number, or Python recurse past its
-stack, is an input error at its column, in well under a second; long parameter chains resolve in linear time
-with the exact values and the cycle report ``a -> b -> a``.
+stack, is an input error at its column (the time guards here catch hangs, not slowness); long parameter chains
+resolve in linear time with the exact values and the cycle report ``a -> b -> a``.
 """
 from __future__ import annotations
 
@@ -74,7 +74,7 @@ def test_bombs_are_refused_quickly(text, fragment):
     elapsed = time.perf_counter() - start
     assert fragment in info.value.message
     assert 0 <= info.value.column < len(text)
-    assert elapsed < 1.0, f"{elapsed:.2f} s"
+    assert elapsed < 15.0, f"{elapsed:.2f} s"  # a hang guard (a bomb that is not refused runs for hours), not a speed test
 
 
 @pytest.mark.parametrize("text, column", [
@@ -116,13 +116,36 @@ def test_ordinary_numbers_stay_exact(text, expected):
     assert parse_expression(text, SYMS) == expected
 
 
-def test_long_ordinary_sums_and_products_are_linear():
-    """2000 terms or factors: one flatten, not one per operator (that took about a second)."""
-    start = time.perf_counter()
-    assert parse_expression("+".join(["x"] * 1999), SYMS) == 1999 * X
-    assert parse_expression("*".join(["x"] * 1999), SYMS) == X**1999
-    assert parse_expression(_join("+", (f"{k}/7*x" for k in range(1, 600))), SYMS).is_Mul
-    assert time.perf_counter() - start < 1.0
+@pytest.fixture
+def flatten_calls(monkeypatch):
+    """How many times sympy flattens an Add or a Mul: a count of work that does not depend on machine load."""
+    calls = {"Add": 0, "Mul": 0}
+    for cls in (sp.Add, sp.Mul):
+        original = cls.flatten.__func__
+
+        def counted(klass, seq, _original=original, _name=cls.__name__):
+            calls[_name] += 1
+            return _original(klass, seq)
+
+        monkeypatch.setattr(cls, "flatten", classmethod(counted))
+    return calls
+
+
+def test_long_ordinary_sums_and_products_are_linear(flatten_calls):
+    """2000 terms or factors: one flatten, not one per operator (that was quadratic and took about a second).
+
+    Counted, not timed: a wall-clock bound failed on a loaded CI machine (1.2 s for 0.1 s of work)."""
+    parsed = parse_expression("+".join(["x"] * 1999), SYMS)
+    assert flatten_calls["Add"] <= 5, flatten_calls
+    assert parsed == 1999 * X
+    flatten_calls.update(Add=0, Mul=0)
+    parsed = parse_expression("*".join(["x"] * 1999), SYMS)
+    assert flatten_calls["Mul"] <= 5, flatten_calls
+    assert parsed == X**1999
+    flatten_calls.update(Add=0, Mul=0)
+    parsed = parse_expression(_join("+", (f"{k}/7*x" for k in range(1, 600))), SYMS)
+    assert flatten_calls["Add"] <= 5, flatten_calls  # the 599 terms are one Add, built once
+    assert parsed.is_Mul
 
 
 # ----------------------------------------------------------------------------------------- in a file, in --set
@@ -149,7 +172,7 @@ def test_bomb_in_a_file_is_a_positioned_input_error(tmp_path, bomb, fragment):
     path.write_text(MODEL.format(k=f'"{bomb}"'), encoding="utf-8")
     start = time.perf_counter()
     result = runner.invoke(app, ["info", str(path)])
-    assert time.perf_counter() - start < 5.0
+    assert time.perf_counter() - start < 30.0  # a hang guard, not a speed test
     assert result.exit_code == 2, (result.stdout, result.stderr)
     line = result.stderr.strip()
     assert line.startswith(f"{path}:4:"), line
@@ -196,7 +219,7 @@ def test_chain_of_2000_parameters_loads_in_linear_time(tmp_path):
     model = mechsys.load(path)
     elapsed = time.perf_counter() - start
     assert model.parameters["p1999"] == 2000.0
-    assert elapsed < 5.0, f"{elapsed:.1f} s"
+    assert elapsed < 30.0, f"{elapsed:.1f} s"  # a hang guard: the quadratic resolution took minutes here
 
 
 def test_long_ring_is_reported_as_a_cycle(tmp_path):
