@@ -44,6 +44,7 @@ bench: $(STAMP)
 	$(BIN)/mechsys bench systems/double_pendulum.yaml --t-end 5
 	$(BIN)/mechsys bench systems/four_bar.yaml --t-end 2 --methods native,DOP853,Radau
 	$(BIN)/mechsys bench systems/centrifuge.yaml --t-end 20
+	$(BIN)/mechsys bench tests/data/andrews_squeezer.yaml --t-end 0.03 --methods native,DOP853,Radau --rtols 1e-6,1e-8,1e-10
 
 ## docs: the gallery figures from the bundled models, then the MkDocs site in site/ (--strict: a warning or a broken
 ## link fails); tests/test_docs_examples.py checks every example of the pages

@@ -9,11 +9,13 @@ import math
 from pathlib import Path
 
 import numpy as np
+import pytest
 from scipy.optimize import brentq
 from typer.testing import CliRunner
 
 import mechsys
 from mechsys.analysis.equilibria import EquilibriumProblem, find_equilibria, parameter_values
+from mechsys.analysis.simulate import simulate
 from mechsys.cli import app
 
 ANDREWS = Path(__file__).resolve().parent / "data" / "andrews_squeezer.yaml"
@@ -130,3 +132,18 @@ def test_every_equilibrium_configuration_found():
     for e in result.equilibria:
         stable = abs(wrap(e.coordinates["beta"] - minima[0])) < 1e-6
         assert e.stability == ("stable" if stable else "unstable"), (e.coordinates, e.stability)
+
+
+@pytest.mark.parametrize("method", ["native", "DOP853"])
+def test_work_precision_follows_rtol_on_the_default_output_grid(method):
+    """Issue 13: closed loops on scipy restarted at every output point, so `bench` made 13,037 evaluations at every
+    rtol and its table was flat. On the default grid (t_end/1000) the evaluations now follow rtol, the error of
+    beta(0.03) against the test-set reference falls with it, and 1e-8 costs under 2,500 evaluations."""
+    model = mechsys.load(ANDREWS)
+    k = model.coordinates.index(NAMES[0])
+    runs = {rtol: simulate(model, 0.03, method=method, rtol=rtol, atol=rtol * 1e-3) for rtol in (1e-6, 1e-8)}
+    error = {rtol: abs(r.q[-1, k] - REFERENCE_Q[0]) for rtol, r in runs.items()}
+    assert runs[1e-8].method == method
+    assert error[1e-8] <= 1e-8 and runs[1e-8].rhs_evaluations < 2500, (error, runs[1e-8].rhs_evaluations)
+    assert error[1e-6] > 30 * error[1e-8] and runs[1e-6].rhs_evaluations < runs[1e-8].rhs_evaluations
+    assert max(np.max(r.residual) for r in runs.values()) <= 1e-12  # every output row projected

@@ -145,7 +145,9 @@ def solve_ivp(fun: Callable, t_span: Sequence[float], y0: np.ndarray, method: st
               dense_output: bool = False, events: Sequence[Callable] | None = None, **options):
     """scipy's solve_ivp (the subset mechsys uses: forward in time, method by name), with events located inside
     every step by ``crossings`` instead of by the signs at step ends only, which steps over a crossing pair
-    closer together than a step."""
+    closer together than a step. The result also tells ``nsteps`` (steps taken) and ``h_next`` (the step size the
+    method would take next, None for LSODA), so a following solve can start with it (``first_step``), and where it
+    stopped (``t_reached``, ``y_reached``: with ``t_eval`` the last output may lie before a failure)."""
     from scipy.optimize import OptimizeResult
 
     t0, tf = map(float, t_span)
@@ -203,4 +205,5 @@ def solve_ivp(fun: Callable, t_span: Sequence[float], y0: np.ndarray, method: st
         t_events=[np.asarray(v) for v in t_events] if events else None,
         y_events=[np.asarray(v).reshape(len(v), len(y0)) for v in y_events] if events else None,
         nfev=solver.nfev, njev=solver.njev, nlu=solver.nlu, status=status, message=messages.get(status, message),
-        success=status >= 0)
+        success=status >= 0, nsteps=len(knots) - 1, h_next=getattr(solver, "h_abs", None), t_reached=solver.t,
+        y_reached=solver.y)

@@ -57,6 +57,39 @@ def contact_state(model, c, p, t: float, q: np.ndarray, u: np.ndarray) -> tuple[
     return gaps, vn
 
 
+def _segment(rhs, c, p, grid, t, y, t_end, method, rtol, atol, fns, lift_events, h, reach):
+    """One solve of the impact loop, from (t, y) to t_end or to the first terminal event; for closed loops to an
+    output point about ``reach`` steps of size h away (as simulate's closed-loop paths do), where the state is
+    projected onto the constraints (the outputs inside it too), and again over half the steps when its outputs
+    drift off the constraints.
+    The result carries the ``reach`` used and where the segment ends (``seg_end``)."""
+    from mechsys.analysis.simulate import inner_rows, segment_end
+
+    k = int(np.searchsorted(grid, t + 1e-13 * max(1.0, abs(t)), side="right")) - 1
+    while True:
+        seg_end = float(grid[segment_end(grid, k, reach, h)]) if c.m and k < len(grid) - 1 else t_end
+        t_eval = grid[(grid > t) & (grid <= seg_end)]
+        # a resting state lets the integrator take huge steps: bound them by the output interval so that a
+        # multiplier turning tensile between two step ends is not stepped over
+        options = {"max_step": float(grid[1] - grid[0])} if lift_events and len(grid) > 1 else {}
+        if h > 0.0:
+            options["first_step"] = min(h, seg_end - t, options.get("max_step", h))
+        sol = solve_ivp(rhs, (t, seg_end), y, method=method, rtol=rtol, atol=atol, t_eval=t_eval, events=fns or None,
+                        **options)
+        if not sol.success:
+            raise AnalysisError(f"integration failed at t = {sol.t_reached:.6g}: {sol.message}")
+        if c.m:
+            inner = sol.t < seg_end if sol.status != 1 else np.ones(len(sol.t), dtype=bool)
+            rows = inner_rows(c, p, sol.t[inner], sol.y[:, inner].T, rtol, atol)
+            if rows is None and reach:
+                reach //= 2  # the outputs inside the segment drifted off the constraints: again, shorter
+                continue
+            if rows is not None:
+                sol.y[:, inner] = rows.T
+        sol.reach, sol.seg_end = reach, seg_end
+        return sol
+
+
 def integrate_with_impacts(model, c, rhs, p, grid, y0, method, rtol, atol, event_fns, note_events,
                             capture_velocity):
     """Segments between impacts: gap = 0 (closing) stops the integrator, the impulse law gives the velocities of
@@ -67,7 +100,7 @@ def integrate_with_impacts(model, c, rhs, p, grid, y0, method, rtol, atol, event
     turns tensile (an event), and a touching contact at rest that opens ends the segment once its gap exceeds a
     small threshold, so that its next closing is an event again."""
     from mechsys.analysis.collide import joint_impulses, resolve
-    from mechsys.analysis.simulate import check_on_manifold, project
+    from mechsys.analysis.simulate import PROJECTION_STEPS, check_on_manifold, project
 
     n = c.n
     impacts: list[dict] = []
@@ -78,6 +111,7 @@ def integrate_with_impacts(model, c, rhs, p, grid, y0, method, rtol, atol, event
     stopped = False
     guard = 0
     released: set = set()  # contacts just released by a lift-off: not re-captured at the restart
+    h, reach = 0.0, PROJECTION_STEPS  # the step size reached; steps per projected segment (closed loops)
     while t < t_end and not stopped:
         guard += 1
         if guard > 100000 + (len(grid) if c.m else 0):
@@ -120,18 +154,11 @@ def integrate_with_impacts(model, c, rhs, p, grid, y0, method, rtol, atol, event
         lift_events = _lift_off_functions(rhs, c, p)
         own = gap_events + open_events + lift_events
         fns = [g for _, g in own] + list(event_fns)
-        # closed loops: segments end at the next output point at the latest, where the state is projected onto the
-        # constraints (as simulate's closed-loop path does)
-        later = grid[grid > t + 1e-13 * max(1.0, abs(t))]
-        seg_end = float(later[0]) if c.m and len(later) else t_end
-        t_eval = grid[(grid > t) & (grid <= seg_end)]
-        # a resting state lets the integrator take huge steps: bound them by the output interval so that a
-        # multiplier turning tensile between two step ends is not stepped over
-        bound = {"max_step": float(grid[1] - grid[0])} if lift_events and len(grid) > 1 else {}
-        sol = solve_ivp(rhs, (t, seg_end), y, method=method, rtol=rtol, atol=atol, t_eval=t_eval, events=fns or None,
-                        **bound)
-        if not sol.success:
-            raise AnalysisError(f"integration failed at t = {sol.t[-1]:.6g}: {sol.message}")
+        # closed loops: a segment ends at an output point about PROJECTION_STEPS steps of the size reached away (as
+        # simulate's closed-loop paths do), where the state is projected onto the constraints; shorter when its
+        # outputs drift off the constraints
+        sol = _segment(rhs, c, p, grid, t, y, t_end, method, rtol, atol, fns, lift_events, h, reach)
+        reach, h, seg_end = sol.reach, sol.h_next or 0.0, sol.seg_end
         if len(sol.t):
             times += list(sol.t)
             states += list(np.asarray(sol.y).T)

@@ -17,7 +17,7 @@ if TYPE_CHECKING:  # sympy and the model are imported only where used: a warm ru
 METHODS = ("auto", "native", "CVODE", "RK45", "DOP853", "Radau", "BDF", "LSODA")
 EVALUATIONS_PER_STEP = 20  # the scipy and CVODE paths count the step budget in right-hand-side evaluations
 RESIDUAL_TOLERANCE = 1e-6  # a projected state must satisfy the constraints to 1e-6 x (1 + max |q|, |q'|)
-PROJECTION_STEPS = 20  # native steps (of the size reached) between two projections onto the constraints
+PROJECTION_STEPS = 20  # steps (of the size reached) between two projections onto the constraints
 BUDGET_WINDOW = 10_000  # RHS evaluations between two checks of the pace of a scipy or CVODE run against its budget
 SLOW_WINDOWS = 3  # consecutive windows whose pace would overspend the budget before a run is stopped (a transient
 # that starts slowly, like the initial layer of a stiff scene at a tight tolerance, speeds up within one or two)
@@ -273,7 +273,8 @@ class RightHandSide:
             A = np.vstack([A, self.c.gap_A(t, q, u, self.p)[self.persistent]])
             b = np.concatenate([b, self.c.gap_b(t, q, u, self.p).ravel()[self.persistent]])
         n, m = self.c.n, A.shape[0]
-        K = np.block([[M, A.T], [A, np.zeros((m, m))]])
+        K = np.zeros((n + m, n + m))
+        K[:n, :n], K[:n, n:], K[n:, :n] = M, A.T, A
         sol = np.linalg.lstsq(K, np.concatenate([f, b]), rcond=None)[0] if np.linalg.cond(K) > 1e14 else \
             np.linalg.solve(K, np.concatenate([f, b]))
         return sol[:n], -sol[n:]
@@ -566,9 +567,10 @@ def native_projected(nat, c: Compiled, p: np.ndarray, grid: np.ndarray, y0: np.n
     constraints. A solve spans as many output intervals as about PROJECTION_STEPS steps of the size reached cover
     (at least one), so the step is set by the tolerance, not by the output grid (one solve per output interval
     took a step per output: 2,500 steps for the indicator at --dt 0.01 instead of 650); the outputs inside a solve
-    are its dense output, the last one is projected, and the next solve continues with the step size reached. A
-    solve whose dense outputs leave the constraints by more than max(rtol, atol) is repeated over half the steps
-    (down to one output interval, projected at its end as before). Returns (Y, RHS calls, steps), or (None, calls, t) when the augmented matrix is singular at t."""
+    are its dense output, each projected onto the constraints, the last one is projected too, and the next solve
+    continues with the step size reached. A solve whose dense outputs leave the constraints by more than its own
+    error allows (``inner_rows``) is repeated over half the steps (down to one output interval, projected at its
+    end). Returns (Y, RHS calls, steps), or (None, calls, t) when the augmented matrix is singular at t."""
     n = c.n
     ys, calls, steps = [y0], 0, 0
     y, h = y0, 0.0
@@ -576,10 +578,8 @@ def native_projected(nat, c: Compiled, p: np.ndarray, grid: np.ndarray, y0: np.n
     # steps per solve: halved (for the rest of the run) when the constraints drift beyond the tolerance inside a
     # solve; at 0 a solve spans one output interval
     reach = PROJECTION_STEPS
-    drift_tol = max(rtol, atol)
     while k < last:
-        # the outputs this solve reaches: those within `reach` steps of the current size
-        j = max(k + 1, min(last, int(np.searchsorted(grid, grid[k] + reach * h, side="right")) - 1))
+        j = segment_end(grid, k, reach, h)
         run = nat.run(p, y, grid[k:j + 1], rtol, atol, max_steps=max_steps - steps, h0=h)
         calls += run.nfev
         steps += run.nsteps
@@ -588,19 +588,39 @@ def native_projected(nat, c: Compiled, p: np.ndarray, grid: np.ndarray, y0: np.n
         if run.status:
             raise AnalysisError(f"integration failed at t = {run.t_reached:.6g}: {run.message}"
                                 f"{singularity_note(c, p, float(grid[k]), y)}")
-        inner = grid[k + 1:j]
-        if len(inner) and float(np.max(constraint_residual(c, p, inner, run.y[1:-1, :n], run.y[1:-1, n:]))) > drift_tol:
+        inner = inner_rows(c, p, grid[k + 1:j], run.y[1:-1], rtol, atol)
+        if inner is None:
             reach //= 2  # the dense outputs drifted off the constraints: solve again, shorter
             continue
         h = run.h_next  # the next solve continues with the step size reached (no new initial-step search)
         q, u = project(c, p, float(grid[j]), run.y[-1, :n], run.y[-1, n:])
         check_on_manifold(c, p, float(grid[j]), q, u)
         y = np.concatenate([q, u])
-        ys += list(run.y[1:-1]) + [y]
+        ys += list(inner) + [y]
         if progress is not None:
             progress(float(grid[j]))
         k = j
     return np.array(ys), calls, steps
+
+
+def segment_end(grid: np.ndarray, k: int, reach: int, h: float) -> int:
+    """The index of the output point where a projected solve from grid[k] ends: the last one within ``reach``
+    steps of size h, at least the next one."""
+    last = len(grid) - 1
+    return max(k + 1, min(last, int(np.searchsorted(grid, grid[k] + reach * h, side="right")) - 1))
+
+
+def inner_rows(c: Compiled, p: np.ndarray, t: np.ndarray, Y: np.ndarray, rtol: float, atol: float) -> np.ndarray | None:
+    """The output rows inside a projected solve (its dense output), each projected onto the constraints; None when
+    they left the constraints by more than the integration's own error over the solve allows
+    (PROJECTION_STEPS x max(rtol, atol) x (1 + max |y|)): the caller then solves again over fewer steps."""
+    if len(t) == 0:
+        return Y
+    n = c.n
+    tol = PROJECTION_STEPS * max(rtol, atol) * (1.0 + float(np.max(np.abs(Y))))
+    if float(np.max(constraint_residual(c, p, t, Y[:, :n], Y[:, n:]))) > tol:
+        return None
+    return np.array([np.concatenate(project(c, p, float(ti), y[:n], y[n:])) for ti, y in zip(t, Y)])
 
 
 def output_grid(t_end: float, dt: float | None) -> np.ndarray:
@@ -646,23 +666,50 @@ def _start(model: MechanicalModel, c: Compiled, p: np.ndarray) -> tuple[np.ndarr
 
 def _closed_loop_scipy(rhs: RightHandSide, c: Compiled, p: np.ndarray, grid: np.ndarray, y0: np.ndarray,
                        method: str, rtol: float, atol: float, event_fns: list, note_events) -> tuple:
-    """Closed loops on scipy or CVODE: output interval by output interval, projected onto the constraints."""
+    """Closed loops on scipy or CVODE: projected solves as in ``native_projected`` (each spans about
+    PROJECTION_STEPS steps of the size reached, ends on an output point where the state is projected onto the
+    constraints, starts with the step size reached; shortened when its dense outputs drift off the constraints).
+    One solve per output interval restarted the method at every output. A stopping event ends the rows with the
+    projected state at the event."""
     solve_ivp = ivp_solver(method)
     n = c.n
     ys, times, steps, y = [y0], [0.0], 0, y0
-    for a, b in zip(grid[:-1], grid[1:]):
-        sol = solve_ivp(rhs, (a, b), y, method=method, rtol=rtol, atol=atol, events=event_fns or None)
+    k, last, h, reach = 0, len(grid) - 1, 0.0, PROJECTION_STEPS
+    while k < last:
+        j = segment_end(grid, k, reach, h)
+        first = {"first_step": min(h, float(grid[j] - grid[k]))} if h > 0.0 and method != "CVODE" else {}
+        sol = solve_ivp(rhs, (float(grid[k]), float(grid[j])), y, method=method, rtol=rtol, atol=atol,
+                        t_eval=grid[k + 1:j + 1], events=event_fns or None, **first)
         if not sol.success:
-            raise AnalysisError(f"integration failed at t = {sol.t[-1]:.6g}: {sol.message}"
-                                f"{singularity_note(c, p, float(sol.t[-1]), sol.y[:, -1])}")
-        steps += len(sol.t) - 1
-        q, u = project(c, p, float(sol.t[-1]), sol.y[:n, -1], sol.y[n:, -1])
-        check_on_manifold(c, p, float(sol.t[-1]), q, u)
+            t_fail, y_fail = getattr(sol, "t_reached", None), getattr(sol, "y_reached", None)
+            if t_fail is None:  # CVODE on a grid: its last output
+                t_fail, y_fail = (sol.t[-1], sol.y[:, -1]) if len(sol.t) else (grid[k], y)
+            raise AnalysisError(f"integration failed at t = {t_fail:.6g}: {sol.message}"
+                                f"{singularity_note(c, p, float(t_fail), y_fail)}")
+        stopped = sol.status == 1
+        inner = sol.t < grid[j] if not stopped else np.ones(len(sol.t), dtype=bool)
+        rows = inner_rows(c, p, sol.t[inner], sol.y[:, inner].T, rtol, atol)
+        if rows is None and reach:
+            reach //= 2  # the dense outputs drifted off the constraints: solve again, shorter
+            continue
+        nsteps = getattr(sol, "nsteps", None) or max(1, int(sol.nfev))  # CVODE on a grid: evaluations bound steps
+        steps += nsteps
+        h = getattr(sol, "h_next", None) or (float(grid[j] - grid[k]) / nsteps)
+        ys += list(sol.y[:, inner].T if rows is None else rows)
+        times += list(sol.t[inner])
+        if stopped:
+            t_stop, y_stop = max(((float(ts[-1]), ye[-1]) for ts, ye in zip(sol.t_events, sol.y_events) if len(ts)),
+                                 key=lambda ev: ev[0])  # the stopping event is the last one the solve recorded
+        else:
+            t_stop, y_stop = float(grid[j]), sol.y[:, -1]
+        q, u = project(c, p, t_stop, y_stop[:n], y_stop[n:])
+        check_on_manifold(c, p, t_stop, q, u)
         y = np.concatenate([q, u])
         ys.append(y)
-        times.append(float(sol.t[-1]))
-        if note_events(sol) and sol.status == 1:
+        times.append(t_stop)
+        if note_events(sol) and stopped:
             break
+        k = j
     return np.array(times), np.array(ys), steps
 
 
