@@ -4,7 +4,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mechsys.analysis.continuation import Bifurcation, Branch, BranchPoint, continue_branch, sweep_parameter
+from mechsys.analysis.continuation import (Bifurcation, Branch, BranchPoint, Undefined, continue_branch,
+                                           sweep_parameter)
 
 
 # -- toy problems ------------------------------------------------------------------------------------------
@@ -142,6 +143,29 @@ def test_pitchfork_sweep_dedupes_and_passes_nontrivial_branch():
         assert pt.stable  # eig = p - 3 x^2 = -2 x^2
     # following the parabola, p turns at the pitchfork point: reported as a fold there
     assert kinds(parabola) == ["fold"] and abs(parabola.bifurcations[0].p) < 1e-8
+
+
+def test_a_point_without_eigenvalues_ends_the_branch_with_the_reason_not_the_sweep():
+    """The bicycle's default sweep stopped with "the saddle-point system is singular" where one odd branch reached
+    v = 0 (a singular linearization). An eig callback that cannot linearize ends that branch there, with the
+    reason; the other branches and the points before it are kept; a start without eigenvalues is skipped."""
+    F, Fx, Fp, eig = fold_problem()  # x^2 + p = 0: the branch p = -x^2, folding at p = 0
+
+    def partial_eig(x, p):
+        if p > -0.25:
+            raise Undefined("singular at this point")
+        return eig(x, p)
+
+    skipped = []
+    starts = [(np.array([1.0]), -1.0), (np.array([0.1]), -0.01)]
+    branches = sweep_parameter(F, Fx, Fp, starts, -1.0, 1.0, partial_eig, skipped=skipped, ds=0.05)
+    assert skipped == [(-0.01, "singular at this point")]
+    (branch,) = branches
+    assert branch.points[0].p == -1.0 and all(pt.p <= -0.25 for pt in branch.points)
+    (where, why), = branch.undefined
+    assert -0.25 < where < 0.0 and why == "singular at this point"
+    assert branch.points[-1].p > -0.35  # it got as close as the step allows
+    assert kinds(branch) == []  # the fold lies beyond: not reported from a branch that never reached it
 
 
 # -- 3. centrifuge-like fold -----------------------------------------------------------------------------

@@ -8,7 +8,7 @@ from typing import Callable
 import numpy as np
 import sympy as sp
 
-from mechsys.analysis.continuation import Branch, sweep_parameter
+from mechsys.analysis.continuation import Branch, Undefined, sweep_parameter
 from mechsys.analysis.equilibria import (EquilibriumProblem, drop_singular, make_problem, parameter_values,
                                         singular_note, solve_equilibria, wrap)
 from mechsys.analysis.stability import ZERO_RE, assess, eigen, reduced_pencil
@@ -206,7 +206,10 @@ def sweep(model: MechanicalModel, name: str, start: float, stop: float, points: 
     def eig(z, p):
         z = D * z
         par.at(p)
-        A, B, _ = reduced_pencil(problem, problem.equilibrium(z))
+        try:
+            A, B, _ = reduced_pencil(problem, problem.equilibrium(z))
+        except AnalysisError as exc:  # e.g. a singular saddle-point system: the branch ends here, with the reason
+            raise Undefined(str(exc)) from None
         return eigen(A, B)[0]
 
     starts = []
@@ -240,8 +243,9 @@ def sweep(model: MechanicalModel, name: str, start: float, stop: float, points: 
                   for p in sorted({p for (_, p), ok in zip(starts, keep) if not ok})]
     starts = [st for st, ok in zip(starts, keep) if ok]
     # the step limit grows with the points asked for (a branch needs at least points - 1 steps to cross the range)
+    skipped: list[tuple[float, str]] = []
     try:
-        branches = sweep_parameter(F, Fx, Fp, starts, lo, hi, eig, ds=step / 2,
+        branches = sweep_parameter(F, Fx, Fp, starts, lo, hi, eig, skipped=skipped, ds=step / 2,
                                    ds_max=min(step, 0.2 * max(span, 1.0)), tol_re=ZERO_RE * 10,
                                    max_steps=max(2000, 20 * points), x_scale=arc,
                                    tol_scale=None if arc is None else np.ones(len(arc))) if starts else []
@@ -277,7 +281,14 @@ def sweep(model: MechanicalModel, name: str, start: float, stop: float, points: 
         result.notes.append(f"branch(es) {', '.join(map(str, cut))} ended at the step limit ({max(2000, 20 * points)} "
                             "steps) inside the range: they are incomplete, and a start found on their untraced part "
                             "may appear as a further branch (use fewer points or a narrower range)")
+    for p0, why in skipped:
+        result.notes.append(f"a steady motion found at {name} = {p0:g} is not continued: its linearization is not "
+                            f"defined ({why})")
     for k, branch in enumerate(branches, start=1):
+        for v, why in branch.undefined:
+            where = "inside the range" if lo < v < hi else "at the end of the range,"
+            result.notes.append(f"branch {k} ends {where} at {name} = {v:.6g}: the linearization is not defined "
+                                f"there ({why}), so neither stability nor bifurcations are followed to that point")
         inside = [v for v in branch.stalled if lo < v < hi]
         if inside:
             where = " and ".join(f"{name} = {v:.6g}" for v in inside)

@@ -41,10 +41,16 @@ class Branch:
     bifurcations: list[Bifurcation] = field(default_factory=list)
     truncated: bool = False  # the step limit ended it inside the range (not a bound, a closed loop or ds_min)
     stalled: list[float] = field(default_factory=list)  # p where it ended inside the range: no step >= ds_min
+    undefined: list[tuple[float, str]] = field(default_factory=list)  # (p, why) where it ended: no eigenvalues
 
 
 class _Fail(Exception):
     """A re-corrected point inside a step could not be computed."""
+
+
+class Undefined(_Fail):
+    """Raised by an ``eig`` callback where the eigenvalues are not defined (e.g. a singular linearization): the
+    branch ends at that point, with the reason (``Branch.undefined``), instead of the whole sweep failing."""
 
 
 def _solve(J: np.ndarray, r: np.ndarray) -> np.ndarray:
@@ -501,8 +507,13 @@ class _Continuation:
                     chord = cur.z + (s_st / seg) * (z1 - cur.z)
                     if np.linalg.norm(start.z - chord) <= 0.25 * np.linalg.norm(z1 - cur.z):
                         z1, t1, final, closed = start.z, start.t, True, True
-            nxt = self.node(z1, t1) if not closed else start
-            for _, bif in self.detect(cur, nxt, len(branch.points) - 1):
+            try:
+                nxt = self.node(z1, t1) if not closed else start
+                found = self.detect(cur, nxt, len(branch.points) - 1)
+            except Undefined as exc:
+                branch.undefined.append((float(z1[n]), str(exc)))
+                break
+            for _, bif in found:
                 branch.bifurcations.append(bif)
             branch.points.append(self.point(nxt) if not closed else branch.points[0])
             accepted += 1
@@ -605,12 +616,14 @@ def _on_branch(cont: _Continuation, branch: Branch, z: np.ndarray) -> bool:
 
 
 def sweep_parameter(F: ArrayFn, Fx: ArrayFn, Fp: ArrayFn, starts: list[tuple[np.ndarray, float]], p_min: float,
-                    p_max: float, eig: ArrayFn, **kw: Any) -> list[Branch]:
+                    p_max: float, eig: ArrayFn, skipped: list[tuple[float, str]] | None = None,
+                    **kw: Any) -> list[Branch]:
     """Trace each start both ways (direction -1 and +1) and merge the two halves into one branch along the arc.
 
     The merged points run from the end of the direction -1 half, through the start, to the end of the +1 half;
     bifurcation indices refer to the merged list. A start that lies on an already-traced branch is skipped; a
     closed branch is traced once. ``kw`` are the keyword options of ``continue_branch`` (``direction`` ignored).
+    A start where ``eig`` raises Undefined is not traced; its (p, reason) is appended to ``skipped``.
     """
     kw = dict(kw)
     kw.pop("direction", None)
@@ -627,11 +640,16 @@ def sweep_parameter(F: ArrayFn, Fx: ArrayFn, Fp: ArrayFn, starts: list[tuple[np.
         cont, z0 = _setup(F, Fx, Fp, x0, p0, p_min, p_max, eig, **defaults)
         if any(_on_branch(cont, br, z0) for _, br in out):
             continue
-        fwd, closed = cont.run(z0, +1.0)
-        if closed:
-            out.append((cont, fwd))
+        try:
+            fwd, closed = cont.run(z0, +1.0)
+            if closed:
+                out.append((cont, fwd))
+                continue
+            bwd, _ = cont.run(z0, -1.0)
+        except Undefined as exc:  # at the start itself
+            if skipped is not None:
+                skipped.append((float(p0), str(exc)))
             continue
-        bwd, _ = cont.run(z0, -1.0)
         out.append((cont, _merge(bwd, fwd)))
     return [br for _, br in out]
 
@@ -655,4 +673,4 @@ def _merge(bwd: Branch, fwd: Branch) -> Branch:
             bifs.append(Bifurcation(b.kind, b.p, b.x, b.index + m - 1))
     bifs.sort(key=lambda b: b.index)
     return Branch(points=points, bifurcations=bifs, truncated=bwd.truncated or fwd.truncated,
-                  stalled=bwd.stalled + fwd.stalled)
+                  stalled=bwd.stalled + fwd.stalled, undefined=bwd.undefined + fwd.undefined)
