@@ -117,7 +117,7 @@ def main() -> int:
     from scipy.integrate import solve_ivp
 
     import mechsys
-    from mechsys.analysis.simulate import RightHandSide, initial_state
+    from mechsys.analysis.motion.simulate import RightHandSide, initial_state
     from mechsys.numeric import native
 
     with tempfile.TemporaryDirectory() as tmp:

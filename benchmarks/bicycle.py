@@ -4,7 +4,7 @@ plain sympy.physics.mechanics pipeline (KanesMethod + linearize, benchmarks/bicy
 
 What is timed, each in a fresh process and with a fresh (empty) mechsys cache unless --warm:
   * mechsys (library): load systems/bicycle.yaml, then at each of the 101 speeds the steady motion (upright,
-    polished by Newton) and its linearization on the constraint manifold (analysis/nonholonomic.py);
+    polished by Newton) and its linearization on the constraint manifold (analysis/equilibrium/nonholonomic.py);
   * mechsys (CLI, what users run): `mechsys equilibria systems/bicycle.yaml --sweep v=0:10:101` with the search
     box of lean and steer the docs use (--search lean=-0.3:0.3 --search steer=-0.3:0.3);
   * sympy: the baseline.
@@ -37,9 +37,9 @@ def mechsys_library() -> dict:
 
     t0 = time.perf_counter()
     import mechsys
-    from mechsys.analysis.bifurcation import swept_parameter
-    from mechsys.analysis.equilibria import _polish, make_problem
-    from mechsys.analysis.nonholonomic import linearize_steady
+    from mechsys.analysis.equilibrium.bifurcation import swept_parameter
+    from mechsys.analysis.equilibrium.equilibria import _polish, make_problem
+    from mechsys.analysis.equilibrium.nonholonomic import linearize_steady
 
     imports = time.perf_counter() - t0
     t0 = time.perf_counter()

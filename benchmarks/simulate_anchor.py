@@ -78,7 +78,7 @@ def scene(n: int, t_end: float, repeat: int) -> dict:
     from scipy.integrate import solve_ivp
 
     import mechsys
-    from mechsys.analysis.simulate import simulate
+    from mechsys.analysis.motion.simulate import simulate
 
     q0, u0 = initial_state(n)
     y0_abs = np.concatenate([np.cumsum(q0), np.cumsum(u0)])  # the anchor's absolute angles

@@ -47,8 +47,8 @@ REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
 import mechsys  # noqa: E402
-from mechsys.analysis import sundials  # noqa: E402
-from mechsys.analysis.simulate import RightHandSide, choose_method, initial_state  # noqa: E402
+from mechsys.analysis.motion import sundials  # noqa: E402
+from mechsys.analysis.motion.simulate import RightHandSide, choose_method, initial_state  # noqa: E402
 
 SCENES = [("stiff_chain", REPO / "tests/data/stiff_chain.yaml", 2.0),
           ("damped_pendulum_chain", REPO / "tests/data/damped_pendulum_chain.yaml", 10.0)]

@@ -325,7 +325,7 @@ def check_range(option: str, lo: float, hi: float, ordered: bool = True, ends: s
 
 def steady_options(given: Optional[List[str]], solve: Optional[List[str]], independent: Optional[str]):
     """--given, --solve and --independent as the library's SteadyOptions."""
-    from mechsys.analysis.equilibria import SteadyOptions
+    from mechsys.analysis.equilibrium.equilibria import SteadyOptions
 
     names = [c.strip() for c in (independent or "").split(",") if c.strip()]
     if independent is not None and not names:
@@ -369,7 +369,7 @@ def equilibria(
     """Equilibria and steady motions, their Lyapunov stability, and (with --sweep) bifurcations."""
 
     def body() -> int:
-        from mechsys.analysis.equilibria import find_equilibria
+        from mechsys.analysis.equilibrium.equilibria import find_equilibria
         from mechsys.report import equilibria as rep
 
         boxes = parse_ranges(search, "--search")
@@ -388,14 +388,14 @@ def equilibria(
         tables = rep.equilibria_tables(result)
         verifications, failed = None, []
         if verify:
-            from mechsys.analysis.verify import disagreements, verify_equilibria
+            from mechsys.analysis.equilibrium.verify import disagreements, verify_equilibria
 
             verifications = verify_equilibria(model, result)
             failed = disagreements(result, verifications)
             tables.append(rep.verification_table(result, verifications))
         bifurcations: list = []
         if sweep_spec:
-            from mechsys.analysis.bifurcation import plot_sweep, sweep
+            from mechsys.analysis.equilibrium.bifurcation import plot_sweep, sweep
 
             (name, (start, stop, n)), = sweep_spec.items()
             swept = sweep(model, name, start, stop, int(n), boxes, options)
@@ -404,15 +404,15 @@ def equilibria(
             if plot is not None:
                 write_figure(plot, lambda tmp: plot_sweep(swept, tmp, plot_coordinate))
         if (linearize_ or hurwitz) and not model.is_holonomic:
-            from mechsys.analysis.equilibria import make_problem
-            from mechsys.analysis.nonholonomic import linearize_steady
+            from mechsys.analysis.equilibrium.equilibria import make_problem
+            from mechsys.analysis.equilibrium.nonholonomic import linearize_steady
 
             problem = make_problem(model, options)
             for k, e in enumerate(result.equilibria, start=1):
                 tables += rep.steady_linearization_tables(linearize_steady(problem, e), f"steady motion {k}",
                                                           options.independent, hurwitz)
         elif linearize_ or hurwitz:
-            from mechsys.analysis.linearize import linearize, symbolic_matrices
+            from mechsys.analysis.equilibrium.linearize import linearize, symbolic_matrices
 
             if linearize_ and not numeric:
                 tables += rep.symbolic_tables(symbolic_matrices(model), model.coordinates)
@@ -462,7 +462,7 @@ def modes(
     """Linear vibration: natural frequencies, damping ratios, mass-normalised modes, FRF, state space."""
 
     def body() -> int:
-        from mechsys.analysis import modes as modal
+        from mechsys.analysis.equilibrium import modes as modal
         from mechsys.report import equilibria as rep
         from mechsys.report.tables import Table
 
@@ -587,7 +587,7 @@ def simulate(
         check_figures(plot=plot)
         check_outputs(output, animate, events_file, impacts_file)
         check_model_file(file)  # before the warm path reads it: a FIFO would hang, a device never end
-        from mechsys.analysis.warm import simulate_file
+        from mechsys.analysis.motion.warm import simulate_file
         from mechsys.report.progress import ProgressBar
 
         bar = ProgressBar(t_end)
@@ -600,7 +600,7 @@ def simulate(
         if animate is not None:  # first: a non-planar model fails before any other file is written
             write_animate(model, result, animate, fps, source=file)
         if reactions:
-            from mechsys.analysis.reactions import append_reactions
+            from mechsys.analysis.motion.reactions import append_reactions
 
             names, data = append_reactions(model, result, names, data, output)
         if output is not None:
@@ -662,8 +662,8 @@ def bench(
     grid of methods and tolerances, against a tight reference solution."""
 
     def body() -> int:
-        from mechsys.analysis.simulate import METHODS
-        from mechsys.analysis.workprecision import plot_work_precision, work_precision
+        from mechsys.analysis.motion.simulate import METHODS
+        from mechsys.analysis.motion.workprecision import plot_work_precision, work_precision
         from mechsys.report.tables import Table
 
         chosen = [m.strip() for m in methods.split(",") if m.strip()]
@@ -754,7 +754,7 @@ def collide(
 
     def body() -> int:
         import mechsys
-        from mechsys.analysis.collide import centre_of_percussion, resolve
+        from mechsys.analysis.impact.collide import centre_of_percussion, resolve
         from mechsys.model.load import parse_assignments
         from mechsys.report.tables import Table
 
@@ -811,7 +811,7 @@ def inverse(
 
     def body() -> int:
         import mechsys
-        from mechsys.analysis.inverse import inverse_dynamics
+        from mechsys.analysis.motion.inverse import inverse_dynamics
         from mechsys.model.load import parse_assignments
         from mechsys.report.inverse import instant_payload, instant_tables
 
@@ -836,7 +836,7 @@ def check(
     """Run the expectations (`expect:` or FILE.check.yaml) of model files; exit 0 only if all pass."""
 
     def body() -> int:
-        from mechsys.analysis.check import junit_xml, run_checks
+        from mechsys.analysis.batch.check import junit_xml, run_checks
         from mechsys.report.tables import Table, render_tables
 
         check_number("--jobs", jobs, 1, MAX_JOBS)
@@ -885,7 +885,7 @@ def _option_number(options: dict, key: str) -> Optional[float]:
 def check_sweep_options(options: dict) -> None:
     """The numeric --option values of a sweep follow the rules of the matching command options."""
     t_end, dt = _option_number(options, "t_end"), _option_number(options, "dt")
-    horizon = 10.0 if t_end is None else t_end  # the simulate task's default horizon (analysis/tasks.py)
+    horizon = 10.0 if t_end is None else t_end  # the simulate task's default horizon (analysis/batch/tasks.py)
     check_time_grid(horizon, dt, "--option t_end", "--option dt")
     for key in ("start", "stop"):
         check_number(f"--option {key}", _option_number(options, key))
@@ -904,7 +904,8 @@ def sweep(
         help="Swept input: a parameter, a coordinate's initial value or der(NAME) its initial rate; N points from "
              "START to STOP. Repeatable (Cartesian grid). With --sample: NAME=LO:HI is the box."),
     run_: str = typer.Option(..., "--run", "-r", help="Analysis of each task: equilibria, simulate, modes, info, "
-                                                       "bifurcations, collide or derive (mechsys/analysis/tasks.py)."),
+                                                       "bifurcations, collide or derive "
+                                                       "(mechsys/analysis/batch/tasks.py)."),
     sample: Optional[str] = typer.Option(None, "--sample", metavar="latin:N|random:N",
                                          help="N points drawn inside the --param boxes instead of the grid."),
     seed: int = typer.Option(0, "--seed", help="Seed of --sample."),
@@ -932,8 +933,8 @@ def sweep(
         import difflib
 
         import mechsys
-        from mechsys.analysis import sweep as sw
-        from mechsys.analysis.tasks import ANALYSES
+        from mechsys.analysis.batch import sweep as sw
+        from mechsys.analysis.batch.tasks import ANALYSES
         from mechsys.model.load import parse_assignments
         from mechsys.report.tables import Table, render_tables
 

@@ -14,8 +14,9 @@ from scipy.optimize import brentq
 from typer.testing import CliRunner
 
 import mechsys
-from mechsys.analysis.equilibria import EquilibriumProblem, find_equilibria, parameter_values
-from mechsys.analysis.simulate import simulate
+from mechsys.analysis.equilibrium.equilibria import EquilibriumProblem, find_equilibria
+from mechsys.numeric.parameters import parameter_values
+from mechsys.analysis.motion.simulate import simulate
 from mechsys.cli import app
 
 ANDREWS = Path(__file__).resolve().parent / "data" / "andrews_squeezer.yaml"

@@ -7,7 +7,7 @@ from PIL import Image
 from typer.testing import CliRunner
 
 import mechsys
-from mechsys.analysis.simulate import simulate
+from mechsys.analysis.motion.simulate import simulate
 from mechsys.cli import app
 from mechsys.errors import InputError
 from mechsys.report.animation import (animation_frames, default_fps, geometry, gif_delay_ms, link_polyline,
@@ -74,7 +74,7 @@ def test_non_planar_system_is_a_clean_input_error(tmp_path, path, sets):
                                            (["--animate", "a.gif", "--fps", "0"], "--fps")])
 def test_bad_animate_options_rejected_before_simulating(tmp_path, monkeypatch, args, message):
     monkeypatch.chdir(tmp_path)
-    monkeypatch.setattr("mechsys.analysis.simulate.simulate", lambda *a, **k: pytest.fail("simulated"))
+    monkeypatch.setattr("mechsys.analysis.motion.simulate.simulate", lambda *a, **k: pytest.fail("simulated"))
     r = invoke("simulate", ROOT / "systems" / "double_pendulum.yaml", *args)
     assert r.exit_code == 2 and message in r.stderr and "Traceback" not in r.stderr
 

@@ -15,9 +15,10 @@ import pytest
 from typer.testing import CliRunner
 
 import mechsys
-from mechsys.analysis.bifurcation import swept_parameter
-from mechsys.analysis.equilibria import _polish, parameter_values
-from mechsys.analysis.nonholonomic import NonholonomicProblem, linearize_steady
+from mechsys.analysis.equilibrium.bifurcation import swept_parameter
+from mechsys.analysis.equilibrium.equilibria import _polish
+from mechsys.numeric.parameters import parameter_values
+from mechsys.analysis.equilibrium.nonholonomic import NonholonomicProblem, linearize_steady
 from mechsys.cli import app
 
 sys.path.insert(0, str(Path(__file__).parent))

@@ -4,7 +4,7 @@ from pathlib import Path
 import numpy as np
 
 import mechsys
-from mechsys.analysis.simulate import compile_model, simulate
+from mechsys.analysis.motion.simulate import compile_model, simulate
 
 ROOT = Path(__file__).resolve().parents[1]
 MODEL = ROOT / "systems" / "double_pendulum.yaml"

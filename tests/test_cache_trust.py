@@ -14,7 +14,7 @@ import pytest
 import yaml
 
 import mechsys
-from mechsys.analysis.simulate import compile_model, simulate
+from mechsys.analysis.motion.simulate import compile_model, simulate
 from mechsys.numeric import cache, native
 from mechsys.model.yamlpos import load_yaml
 from tests.helpers import DATA_DIR, ROOT, SYSTEMS_DIR
@@ -251,7 +251,7 @@ def test_temporary_build_folders_are_removed(tmp_path, setting):
 def test_sweep_model_copies_live_in_a_private_folder(tmp_path):
     """The sweep's copies of a model file used a predictable /tmp/mechsys-sweep-<uid> that was reused if it
     existed (anyone could plant a model there); now each process has its own mkdtemp folder."""
-    from mechsys.analysis import sweep
+    from mechsys.analysis.batch import sweep
 
     text = DP.read_text()
     spec = {"path": str(tmp_path / "gone.yaml"), "text": text, "digest": "abc"}

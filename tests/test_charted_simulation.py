@@ -1,4 +1,4 @@
-"""`mechsys simulate` through gimbal lock (analysis/charted.py): a spherical joint's angles are integrated in another
+"""`mechsys simulate` through gimbal lock (analysis/motion/charted.py): a spherical joint's angles are integrated in another
 sequence near their singular set and written back in the file's sequence. Checked against an independent
 reference written here without mechsys: Euler's equations for the body angular velocity with quaternion
 kinematics, scipy's DOP853 at rtol 1e-12."""
@@ -15,7 +15,7 @@ from scipy.integrate import solve_ivp
 from typer.testing import CliRunner
 
 import mechsys
-from mechsys.analysis.charted import simulate_charted
+from mechsys.analysis.motion.charted import simulate_charted
 from mechsys.cli import app
 from mechsys.numeric.rotations import angles_closed, angles_near, rate_matrix, ratio, ratio_at, rotation
 
@@ -258,7 +258,7 @@ def test_cli_simulate_from_a_gimbal_lock_writes_the_files_angles(tmp_path):
 def test_warm_plan_is_not_used_across_a_gimbal_lock(tmp_path):
     """A plan stored by a short run (no lock reached) must not carry a longer run through the lock in the
     singular chart: the warm run checks its rows and hands over to the full path, which switches charts."""
-    from mechsys.analysis.warm import run_planned, simulate_file
+    from mechsys.analysis.motion.warm import run_planned, simulate_file
     from mechsys.numeric import native
 
     if native.compiler() is None:

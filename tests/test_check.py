@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from mechsys.analysis.check import evaluate
+from mechsys.analysis.batch.check import evaluate
 
 ROOT = Path(__file__).resolve().parents[1]
 SYSTEMS = ROOT / "systems"

@@ -54,7 +54,7 @@ def no_analysis(monkeypatch):
         pytest.fail("the command went on to load the model")
 
     monkeypatch.setattr("mechsys.load", fail)
-    monkeypatch.setattr("mechsys.analysis.warm.simulate_file", fail)
+    monkeypatch.setattr("mechsys.analysis.motion.warm.simulate_file", fail)
 
 
 # ----------------------------------------------------------------------------------------- 1. numeric options
@@ -111,7 +111,7 @@ NUMERIC_CASES = [
 def test_numeric_options_are_refused_with_one_line_before_any_work(args, message, no_analysis, tmp_path,
                                                                    monkeypatch):
     monkeypatch.chdir(tmp_path)
-    monkeypatch.setattr("mechsys.analysis.check.run_checks", lambda *a, **k: pytest.fail("checks ran"))
+    monkeypatch.setattr("mechsys.analysis.batch.check.run_checks", lambda *a, **k: pytest.fail("checks ran"))
     line = one_line(invoke(*args))
     assert message in line
 

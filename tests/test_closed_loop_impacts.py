@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import mechsys
-from mechsys.analysis.simulate import simulate
+from mechsys.analysis.motion.simulate import simulate
 from tests.helpers import SYSTEMS_DIR
 
 

@@ -44,7 +44,7 @@ import pytest
 from typer.testing import CliRunner
 
 import mechsys
-from mechsys.analysis.collide import resolve
+from mechsys.analysis.impact.collide import resolve
 from mechsys.cli import app
 
 DATA = Path(__file__).resolve().parent / "data"

@@ -21,7 +21,7 @@ import pytest
 from scipy.optimize import brentq
 
 import mechsys
-from mechsys.analysis.simulate import simulate
+from mechsys.analysis.motion.simulate import simulate
 
 DATA = Path(__file__).resolve().parent / "data"
 ROOT = DATA.parents[1]

@@ -1,7 +1,7 @@
 """Impacts against Krodkiewski, "Dynamics of Mechanical Systems", ch. 3 (digest: seed000_part1_digest.md §1.7 and
 problems 40-56; the CORRECTED forms and the [computed] numbers are used, never a printed typo).
 
-Part 1 (`mechsys collide`, `mechsys.analysis.collide.resolve`): one impact at a given state.
+Part 1 (`mechsys collide`, `mechsys.analysis.impact.collide.resolve`): one impact at a given state.
 Part 2 (`mechsys simulate` with gap contacts as events): sequential impacts, the rest rule, the impact table.
 
 Tolerances: closed forms to 1e-9 relative; numbers the digest prints are compared to its printed digits.
@@ -18,7 +18,7 @@ import pytest
 from typer.testing import CliRunner
 
 import mechsys
-from mechsys.analysis.collide import resolve
+from mechsys.analysis.impact.collide import resolve
 from mechsys.cli import app
 from mechsys.errors import AnalysisError
 
@@ -216,7 +216,7 @@ def test_p46_oblique_impact_on_spring_block():
 
 def test_p46_amplitude_of_the_block_after_the_impact():
     """Post-impact motion from the separation velocities: the block oscillates with A = vs2 sqrt(M/k)."""
-    from mechsys.analysis.simulate import simulate
+    from mechsys.analysis.motion.simulate import simulate
 
     r = resolve(load(P46))
     after = {f"der({c})": repr(float(x)) for c, x in zip(r.coordinates, r.rates_after)}
@@ -582,7 +582,7 @@ def test_restitution_may_depend_on_the_approach_speed(tmp_path):
 # ================================================================================================================
 def _simulate_child(conn, path, overrides, t_end, dt, kwargs):
     try:
-        from mechsys.analysis.simulate import simulate
+        from mechsys.analysis.motion.simulate import simulate
 
         r = simulate(mechsys.load(path, overrides or None, release_prescribed=True), t_end, dt, **kwargs)
         conn.send({"t": r.t, "q": r.q, "u": r.u, "T": r.T, "V": r.V, "coordinates": r.coordinates,

@@ -23,8 +23,8 @@ import pytest
 from typer.testing import CliRunner
 
 import mechsys
-from mechsys.analysis.collide import resolve
-from mechsys.analysis.simulate import simulate
+from mechsys.analysis.impact.collide import resolve
+from mechsys.analysis.motion.simulate import simulate
 from mechsys.cli import app
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mechsys.analysis.continuation import (Bifurcation, Branch, BranchPoint, Undefined, continue_branch,
+from mechsys.analysis.equilibrium.continuation import (Bifurcation, Branch, BranchPoint, Undefined, continue_branch,
                                            sweep_parameter)
 
 
@@ -275,7 +275,7 @@ def test_equilibria_sweep_step_limit_follows_the_points(monkeypatch):
     """bifurcation.sweep asks for enough steps to cross the range at the requested resolution, and reports a
     truncated branch in the notes of its table."""
     import mechsys
-    from mechsys.analysis import bifurcation
+    from mechsys.analysis.equilibrium import bifurcation
     from mechsys.report.equilibria import sweep_tables
 
     seen = {}
@@ -305,7 +305,7 @@ def test_family_sweep_of_a_given_cyclic_rate_follows_the_closed_form():
     import math
 
     import mechsys
-    from mechsys.analysis.bifurcation import sweep
+    from mechsys.analysis.equilibrium.bifurcation import sweep
     from tests.helpers import SYSTEMS_DIR
 
     model = mechsys.load(SYSTEMS_DIR / "centrifuge.yaml", {"Mo": 0, "dM": 0, "der(alpha)": 7})
@@ -328,7 +328,7 @@ def test_conservative_branches_carry_the_point_verdict():
     mass (Lagrange-Dirichlet: stable); the three configurations with a rod upright are maxima or saddles of it
     (unstable). Along a sweep of m1 each branch point carries that verdict."""
     import mechsys
-    from mechsys.analysis.bifurcation import sweep
+    from mechsys.analysis.equilibrium.bifurcation import sweep
     from mechsys.report.equilibria import sweep_tables
     from tests.helpers import SYSTEMS_DIR
 
@@ -399,7 +399,7 @@ def centrifuge_family(beta, w, P):
 @pytest.fixture(scope="module")
 def free_centrifuge_rate_sweep():
     import mechsys
-    from mechsys.analysis.bifurcation import sweep
+    from mechsys.analysis.equilibrium.bifurcation import sweep
     from tests.helpers import SYSTEMS_DIR
 
     model = mechsys.load(SYSTEMS_DIR / "centrifuge.yaml", FREE_CENTRIFUGE)
@@ -472,7 +472,7 @@ def test_rate_sweep_refused_where_the_rate_is_not_a_family_parameter():
     """der(alpha) with the motor: the torque balance fixes the steady rate (an unknown, not a parameter); der(beta):
     beta is not cyclic; der(gamma): no such coordinate. Each is one line and exit 2."""
     import mechsys
-    from mechsys.analysis.bifurcation import sweep
+    from mechsys.analysis.equilibrium.bifurcation import sweep
     from mechsys.errors import InputError
     from tests.helpers import SYSTEMS_DIR
 
@@ -500,8 +500,8 @@ def test_swept_rate_derivatives_are_exact(tmp_path):
     `rate: 2*W` the same through the rate's expression (the rate follows its parameter along a sweep of W), and
     the parameters' own column. Checked against central differences on the free centrifuge."""
     import mechsys
-    from mechsys.analysis.bifurcation import swept_parameter
-    from mechsys.analysis.equilibria import EquilibriumProblem
+    from mechsys.analysis.equilibrium.bifurcation import swept_parameter
+    from mechsys.analysis.equilibrium.equilibria import EquilibriumProblem
     from tests.helpers import SYSTEMS_DIR
 
     text = (SYSTEMS_DIR / "centrifuge.yaml").read_text()
@@ -530,7 +530,7 @@ def test_sleeping_top_loses_gyroscopic_stability_by_a_collision_not_a_hopf_point
     import math
 
     import mechsys
-    from mechsys.analysis.bifurcation import sweep
+    from mechsys.analysis.equilibrium.bifurcation import sweep
     from tests.helpers import DATA_DIR
 
     model = mechsys.load(DATA_DIR / "sleeping_top_xyz.yaml")
@@ -571,7 +571,7 @@ def test_negative_damping_gives_a_genuine_hopf_point(tmp_path):
     / (2 m l^2), Re = mu / 2 crosses 0 at mu = 0 with speed 1/2 and frequency sqrt(g/l). Upright it is a saddle
     (real eigenvalues of both signs): nothing there."""
     import mechsys
-    from mechsys.analysis.bifurcation import sweep
+    from mechsys.analysis.equilibrium.bifurcation import sweep
 
     path = tmp_path / "self_excited_pendulum.yaml"
     path.write_text(SELF_EXCITED_PENDULUM, encoding="utf-8")
@@ -584,8 +584,8 @@ def test_negative_damping_gives_a_genuine_hopf_point(tmp_path):
 def test_failed_newton_correction_is_a_clear_error_not_an_internal_one(tmp_path, monkeypatch):
     """A start whose Newton correction fails ends the command with exit 1 and the continuation's message (forced
     here: one Newton iteration allowed, from a start off the equilibrium)."""
-    import mechsys.analysis.bifurcation as bifurcation
-    import mechsys.analysis.continuation as continuation
+    import mechsys.analysis.equilibrium.bifurcation as bifurcation
+    import mechsys.analysis.equilibrium.continuation as continuation
     from typer.testing import CliRunner
 
     from mechsys.cli import app
@@ -607,7 +607,7 @@ def test_equations_undefined_beyond_a_point_end_the_branch_with_a_note(tmp_path)
     skipped with a note (it was `internal error: ValueError: math domain error`), and the branches, whose
     corrector fails at mu -> 0, end there with a note saying so."""
     import mechsys
-    from mechsys.analysis.bifurcation import sweep
+    from mechsys.analysis.equilibrium.bifurcation import sweep
 
     path = tmp_path / "sqrt_torque.yaml"
     text = SELF_EXCITED_PENDULUM.replace("(mu - th**2)*der(th)", "sqrt(mu) - der(th)").replace("mu: -0.5", "mu: 0.5")
@@ -655,7 +655,7 @@ def test_parameters_defined_from_a_swept_one_follow_it_and_an_override_cuts_the_
     thousands of times); the memo belongs to the definitions: after --set dM=2 (with_overrides), dM no longer
     follows Mo, even when the original model was asked first."""
     import mechsys
-    from mechsys.analysis.equilibria import parameter_values
+    from mechsys.numeric.parameters import parameter_values
     from tests.helpers import SYSTEMS_DIR
 
     model = mechsys.load(SYSTEMS_DIR / "centrifuge.yaml")

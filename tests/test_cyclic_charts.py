@@ -192,7 +192,7 @@ def test_torque_free_spin_at_gimbal_lock_is_classified_in_another_sequence(axis)
 
 
 def test_simulate_from_a_gimbal_lock_names_the_chart_not_the_inertia(tmp_path):
-    """A time-dependent torque keeps simulate from re-charting (analysis/charted.py needs an autonomous model;
+    """A time-dependent torque keeps simulate from re-charting (analysis/motion/charted.py needs an autonomous model;
     tests/test_charted_simulation.py runs the torque-free start): it stops and names the chart."""
     text = (ROOT / "tests" / "data" / "torque_free_body.yaml").read_text()
     text = text.replace("theta: {initial: 0, rate: 0}", "theta: {initial: pi/2, rate: 1}")

@@ -12,7 +12,7 @@ import pytest
 from scipy.integrate import quad
 
 import mechsys
-from mechsys.analysis.simulate import simulate
+from mechsys.analysis.motion.simulate import simulate
 from mechsys.cli import main as cli_main
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -184,7 +184,7 @@ def test_centrifuge_steady_motions_beyond_the_default_rate_box(speed, count):
     import numpy as np
 
     import mechsys
-    from mechsys.analysis.equilibria import find_equilibria
+    from mechsys.analysis.equilibrium.equilibria import find_equilibria
 
     model = mechsys.load(CENTRIFUGE, {"dM": "50/7", "Mo": f"{speed}*50/7"})
     P = model.parameters

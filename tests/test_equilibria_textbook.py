@@ -11,7 +11,7 @@ Reference values are the digests' recomputed ([NUM-R]/[DERIVED]) or closed-form 
 printed values where the digest lists them as errata (e.g. the centrifuge's beta_s4 = 1.399 is wrong; 1.410445 is
 right). Tolerances follow the digest's stated precision: closed forms tight, 6-decimal tables at 1e-5/1e-6.
 
-API under test (mechsys.analysis.equilibria / linearize): find_equilibria(model, search) -> .equilibria (sorted by
+API under test (mechsys.analysis.equilibrium.equilibria / linearize): find_equilibria(model, search) -> .equilibria (sorted by
 coordinates, angles wrapped into (-pi, pi]), each with .coordinates (non-cyclic free coordinates), .rates (steady
 rates of cyclic coordinates), .eigenvalues / .jacobian of the reduced state (non-cyclic q, then all rates),
 .stability in {"asymptotically stable", "stable", "unstable", "undecided"}, .critical, .reason.
@@ -36,13 +36,13 @@ NOT_DECIDED_BY_ROOTS = {"stable", "undecided"}   # allowed verdicts where the ro
 
 # ---------------------------------------------------------------------------------------------------- helpers
 def find_equilibria(model, search=None):
-    from mechsys.analysis.equilibria import find_equilibria as _find
+    from mechsys.analysis.equilibrium.equilibria import find_equilibria as _find
 
     return _find(model, search=search)
 
 
 def linearize(model, eq):
-    from mechsys.analysis.linearize import linearize as _lin
+    from mechsys.analysis.equilibrium.linearize import linearize as _lin
 
     return _lin(model, eq)
 

@@ -9,7 +9,7 @@ import pytest
 from typer.testing import CliRunner
 
 import mechsys
-from mechsys.analysis.simulate import simulate
+from mechsys.analysis.motion.simulate import simulate
 from mechsys.cli import app
 from mechsys.errors import InputError
 

@@ -1,4 +1,4 @@
-"""`mechsys equilibria --exhaustive` (mechsys/analysis/exhaustive.py): every isolated root of equations polynomial in
+"""`mechsys equilibria --exhaustive` (mechsys/analysis/equilibrium/exhaustive.py): every isolated root of equations polynomial in
 the unknowns, sin and cos of the angles, compared with root counts obtained independently (closed forms, sign
 changes on a fine grid, numpy's companion-matrix roots), and the refusals (exit 2, one line)."""
 from __future__ import annotations
@@ -13,8 +13,9 @@ import pytest
 from typer.testing import CliRunner
 
 import mechsys
-from mechsys.analysis.equilibria import EquilibriumProblem, find_equilibria, parameter_values
-from mechsys.analysis.exhaustive import NotExhaustible, exhaustive_roots
+from mechsys.analysis.equilibrium.equilibria import EquilibriumProblem, find_equilibria
+from mechsys.numeric.parameters import parameter_values
+from mechsys.analysis.equilibrium.exhaustive import NotExhaustible, exhaustive_roots
 from mechsys.cli import app
 
 ROOT = Path(__file__).resolve().parents[1]

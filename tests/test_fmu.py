@@ -20,7 +20,7 @@ import pytest
 from test_cli_hardening import invoke, one_line  # the command-line helpers: exit code, one stderr line
 
 import mechsys
-from mechsys.analysis.simulate import simulate
+from mechsys.analysis.motion.simulate import simulate
 from mechsys.codegen import fmu as fmu_module
 from mechsys.codegen.fmu import write_fmu
 from mechsys.errors import InputError
@@ -247,8 +247,8 @@ def test_the_fmu_stepped_by_dop853_matches_mechsys_simulate(fmus, name, sets, me
 def test_the_files_outputs_are_outputs_of_the_fmu(tmp_path):
     """`outputs:` with a vector (three columns), an acceleration, a generalized momentum and a name the code
     reserves (x becomes x_), against mechsys's own output columns along its simulation."""
-    from mechsys.analysis.equilibria import parameter_values
-    from mechsys.analysis.outputs import output_columns
+    from mechsys.numeric.parameters import parameter_values
+    from mechsys.analysis.motion.outputs import output_columns
 
     path = tmp_path / "pendulum_outputs.yaml"
     path.write_text(PENDULUM.read_text(encoding="utf-8").split("\nexpect:")[0] + "\noutputs:\n"

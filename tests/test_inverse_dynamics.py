@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 import mechsys
-from mechsys.analysis.simulate import simulate
+from mechsys.analysis.motion.simulate import simulate
 
 ROOT = Path(__file__).resolve().parents[1]
 

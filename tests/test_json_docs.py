@@ -274,7 +274,7 @@ def test_the_printed_keys_are_the_documented_keys(section, documented, outputs):
 
 def test_the_search_report_prints_eliminated_as_documented(documented):
     """The one documented key no run above prints (NOT_RUN): the search report with eliminated coordinates."""
-    from mechsys.analysis.equilibria import SearchReport
+    from mechsys.analysis.equilibrium.equilibria import SearchReport
 
     report = SearchReport(26, {"lean": (-3.14, 3.14), "pitch": (-3.14, 3.14)}, [], [], [], eliminated=["pitch"])
     walk = Walk(documented["equilibria"])

@@ -27,7 +27,7 @@ DATA = ROOT / "tests" / "data"
 
 
 def vibration_modes(model, at=None):
-    from mechsys.analysis.modes import vibration_modes as _modes
+    from mechsys.analysis.equilibrium.modes import vibration_modes as _modes
 
     return _modes(model, at=at)
 
@@ -36,8 +36,8 @@ def linearize_at(model, coordinates, tol=1e-8):
     """linearize() about the equilibrium found nearest to ``coordinates`` (searched in a small box). ``tol`` > 1e-8
     only for the linear models whose rest points form a continuum (winch: the free drive train), where any rest point
     gives the same matrices."""
-    from mechsys.analysis.equilibria import find_equilibria
-    from mechsys.analysis.linearize import linearize
+    from mechsys.analysis.equilibrium.equilibria import find_equilibria
+    from mechsys.analysis.equilibrium.linearize import linearize
 
     box = {n: (v - 1e-3, v + 1e-3) for n, v in coordinates.items() if not model.angles.get(n, False)}
     res = find_equilibria(model, search=box)
@@ -248,7 +248,7 @@ def test_free_free_chain_has_one_rigid_body_mode():
 def test_free_free_chain_rest_points_are_not_asymptotically_stable_or_unstable():
     """§001.3: the singular K gives a double eigenvalue 0 of A; 'classification must not call this unstable or
     asymptotically stable'."""
-    from mechsys.analysis.equilibria import find_equilibria
+    from mechsys.analysis.equilibrium.equilibria import find_equilibria
 
     model = mechsys.load(DATA / "free_free_chain.yaml")
     res = find_equilibria(model, search={"x1": (-0.05, 0.05), "x2": (-0.05, 0.05), "x3": (-0.05, 0.05)})

@@ -14,8 +14,8 @@ import pytest
 from scipy.integrate import solve_ivp
 
 import mechsys
-from mechsys.analysis.equilibria import parameter_values
-from mechsys.analysis.simulate import RightHandSide, compile_model, initial_state, simulate
+from mechsys.numeric.parameters import parameter_values
+from mechsys.analysis.motion.simulate import RightHandSide, compile_model, initial_state, simulate
 from mechsys.errors import AnalysisError
 from mechsys.numeric import native
 from tests.helpers import DATA_DIR, ROOT, SYSTEMS_DIR, load_data, load_system

@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from mechsys.analysis.equilibria import SteadyOptions, find_equilibria, make_problem
-from mechsys.analysis.nonholonomic import NonholonomicProblem, linearize_steady
+from mechsys.analysis.equilibrium.equilibria import SteadyOptions, find_equilibria, make_problem
+from mechsys.analysis.equilibrium.nonholonomic import NonholonomicProblem, linearize_steady
 from mechsys.cli import app
 
 sys.path.insert(0, str(Path(__file__).parent))
@@ -182,7 +182,7 @@ def test_cached_pieces_equal_uncached_ones_and_skip_the_derivation(tmp_path, mon
     """The compiled steady-motion pieces come back from the on-disk cache (no symbolic work: deriving raises) and
     give the same numbers, bit for bit, as the freshly derived ones; another structure gets another entry."""
     import mechsys
-    from mechsys.analysis.nonholonomic import ConstrainedPieces
+    from mechsys.analysis.equilibrium.nonholonomic import ConstrainedPieces
 
     monkeypatch.setenv("MECHSYS_CACHE", str(tmp_path))
     fresh = ConstrainedPieces(mechsys.load(WHEEL), "kane")
@@ -207,7 +207,7 @@ def test_compiled_pieces_are_cached_and_the_python_path_remains(tmp_path, monkey
     """With a C compiler the pieces are compiled once into the cache (a signed library whose key includes the
     source's hash) and loaded from there; MECHSYS_NATIVE=off keeps the generated Python, with the same numbers."""
     import mechsys
-    from mechsys.analysis.nonholonomic import ConstrainedPieces
+    from mechsys.analysis.equilibrium.nonholonomic import ConstrainedPieces
     from mechsys.numeric.native import compiler
 
     if compiler() is None:

@@ -15,9 +15,9 @@ import sympy as sp
 from typer.testing import CliRunner
 
 import mechsys
-from mechsys.analysis.equilibria import find_equilibria
-from mechsys.analysis.modes import vibration_modes
-from mechsys.analysis.simulate import simulate
+from mechsys.analysis.equilibrium.equilibria import find_equilibria
+from mechsys.analysis.equilibrium.modes import vibration_modes
+from mechsys.analysis.motion.simulate import simulate
 from mechsys.cli import app
 from mechsys.report.printing import to_latex
 
@@ -157,8 +157,8 @@ def test_to_dataframe_without_pandas_names_the_extra(monkeypatch, centrifuge_equ
 
 def test_the_library_imports_and_renders_without_pandas_and_ipython():
     code = ("import sys; sys.modules['pandas'] = None; sys.modules['IPython'] = None\n"
-            "import mechsys, mechsys.report.notebook, mechsys.analysis.simulate, mechsys.analysis.modes\n"
-            "from mechsys.analysis.equilibria import find_equilibria\n"
+            "import mechsys, mechsys.report.notebook, mechsys.analysis.motion.simulate, mechsys.analysis.equilibrium.modes\n"
+            "from mechsys.analysis.equilibrium.equilibria import find_equilibria\n"
             f"r = find_equilibria(mechsys.load({str(CENTRIFUGE)!r}))\n"
             "assert '1.410445' in r._repr_markdown_()\n"
             "try:\n    r.to_dataframe()\nexcept ImportError as e:\n    print(e)\n")

@@ -75,7 +75,7 @@ def _without_pyarrow(monkeypatch):
 
 def test_parquet_without_pyarrow_names_the_extra(tmp_path, monkeypatch):
     _without_pyarrow(monkeypatch)
-    monkeypatch.setattr("mechsys.analysis.simulate.simulate", lambda *a, **k: pytest.fail("simulated"))
+    monkeypatch.setattr("mechsys.analysis.motion.simulate.simulate", lambda *a, **k: pytest.fail("simulated"))
     out = tmp_path / "r.parquet"
     r = invoke("simulate", ROOT / "systems" / "double_pendulum.yaml", "-o", out)
     assert r.exit_code == 2 and "pip install mechsys[parquet]" in r.stderr

@@ -8,9 +8,9 @@ import pytest
 from typer.testing import CliRunner
 
 import mechsys
-from mechsys.analysis.equilibria import parameter_values
-from mechsys.analysis.reactions import COMPONENTS, column_names, reaction_columns, reaction_notes
-from mechsys.analysis.simulate import simulate
+from mechsys.numeric.parameters import parameter_values
+from mechsys.analysis.motion.reactions import COMPONENTS, column_names, reaction_columns, reaction_notes
+from mechsys.analysis.motion.simulate import simulate
 from mechsys.cli import app
 from tests.helpers import double_pendulum_accelerations
 

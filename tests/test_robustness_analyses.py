@@ -134,7 +134,7 @@ def test_centrifuge_dM_equal_to_Mo_steady_speed_one_rad_per_second():
 
 def test_sweep_sensitivity_that_is_the_bare_swept_symbol(tmp_path):
     """d(m1)/d(m2) = m2 for m1: m2**2/2 (the derivative is the bare symbol m2): evaluated to its value 0.8."""
-    from mechsys.analysis.bifurcation import parameter_sensitivity
+    from mechsys.analysis.equilibrium.bifurcation import parameter_sensitivity
 
     path = tmp_path / "square.yaml"
     path.write_text(DOUBLE.read_text().replace("  m1: 1.0 ", "  m1: m2**2/2 "), encoding="utf-8")

@@ -1,4 +1,4 @@
-"""Forward dynamics (mechsys.analysis.simulate) against the textbook digests.
+"""Forward dynamics (mechsys.analysis.motion.simulate) against the textbook digests.
 
 Sources (/work/shared/reference):
 - seed000_part1_digest.md, P1 (motor-driven arm, Krodkiewski p. 19-24, eqs (1.43)-(1.44));
@@ -21,7 +21,7 @@ import pytest
 from helpers import double_pendulum_accelerations, load_data, load_system
 from scipy.integrate import solve_ivp
 
-from mechsys.analysis.simulate import simulate
+from mechsys.analysis.motion.simulate import simulate
 
 REF = dict(method="DOP853", rtol=1e-13, atol=1e-14)  # the "tight reference" settings of the brief / mechsys bench
 

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import mechsys
-from mechsys.analysis.simulate import RESIDUAL_TOLERANCE, simulate
+from mechsys.analysis.motion.simulate import RESIDUAL_TOLERANCE, simulate
 from mechsys.errors import AnalysisError
 from tests.helpers import DATA_DIR, ROOT, SYSTEMS_DIR
 

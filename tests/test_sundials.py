@@ -1,4 +1,4 @@
-"""SUNDIALS CVODE integrator (mechsys.analysis.sundials) against scipy's integrators on mechsys scenes."""
+"""SUNDIALS CVODE integrator (mechsys.analysis.motion.sundials) against scipy's integrators on mechsys scenes."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -11,8 +11,8 @@ from scipy.linalg import expm
 pytest.importorskip("sksundae")
 
 import mechsys  # noqa: E402
-from mechsys.analysis import sundials  # noqa: E402
-from mechsys.analysis.simulate import RightHandSide, initial_state  # noqa: E402
+from mechsys.analysis.motion import sundials  # noqa: E402
+from mechsys.analysis.motion.simulate import RightHandSide, initial_state  # noqa: E402
 from mechsys.errors import AnalysisError  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -179,7 +179,7 @@ def test_bad_arguments_raise_analysis_error() -> None:
 
 def test_simulate_auto_uses_cvode_for_the_stiff_chain_and_matches_radau():
     """Wired into simulate: auto picks CVODE for a stiff scene (at rtol/100) and agrees with a tight Radau run."""
-    from mechsys.analysis.simulate import simulate
+    from mechsys.analysis.motion.simulate import simulate
     from tests.helpers import load_data
 
     model = load_data("stiff_chain")
@@ -191,7 +191,7 @@ def test_simulate_auto_uses_cvode_for_the_stiff_chain_and_matches_radau():
 
 
 def test_cvode_refuses_contacts_with_a_reason():
-    from mechsys.analysis.simulate import simulate
+    from mechsys.analysis.motion.simulate import simulate
     from mechsys.errors import AnalysisError
     from tests.helpers import load_system
 

@@ -9,8 +9,8 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
-from mechsys.analysis import sweep as sw
-from mechsys.analysis.tasks import run_task
+from mechsys.analysis.batch import sweep as sw
+from mechsys.analysis.batch.tasks import run_task
 from mechsys.cli import app
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -1,4 +1,4 @@
-"""`mechsys equilibria --verify` (mechsys/analysis/verify.py): perturbed motions about each equilibrium against its
+"""`mechsys equilibria --verify` (mechsys/analysis/equilibrium/verify.py): perturbed motions about each equilibrium against its
 verdict. The bundled centrifuge (four steady motions at omega = 7: unstable, asymptotically stable, unstable,
 asymptotically stable; digest §2.2) and problem 57 (§2.1) agree; a conservative pendulum agrees (hanging bounded,
 inverted grows); a deliberately wrong verdict is flagged; the CLI's exit status and JSON shape; the documented
@@ -17,8 +17,8 @@ import pytest
 from typer.testing import CliRunner
 
 import mechsys
-from mechsys.analysis.equilibria import find_equilibria
-from mechsys.analysis.verify import (VerifyOptions, agreement, disagreements, horizon, verify_equilibria,
+from mechsys.analysis.equilibrium.equilibria import find_equilibria
+from mechsys.analysis.equilibrium.verify import (VerifyOptions, agreement, disagreements, horizon, verify_equilibria,
                                      verify_equilibrium)
 from mechsys.cli import app
 
@@ -224,7 +224,7 @@ def test_cli_without_verify_has_no_verification():
 def test_cli_disagreement_is_printed_and_exits_one(monkeypatch):
     """A wrong verdict (injected) is named in the table, on stderr, and makes the exit status 1; the output is
     complete."""
-    import mechsys.analysis.equilibria as eq
+    import mechsys.analysis.equilibrium.equilibria as eq
 
     real = eq.find_equilibria
 

@@ -242,7 +242,7 @@ def test_non_planar_model_gets_an_html_view(tmp_path):
 @needs_plotly
 def test_bad_options_are_one_line_before_any_work(tmp_path, monkeypatch, args, message):
     monkeypatch.chdir(tmp_path)
-    monkeypatch.setattr("mechsys.analysis.simulate.simulate", lambda *a, **k: pytest.fail("simulated"))
+    monkeypatch.setattr("mechsys.analysis.motion.simulate.simulate", lambda *a, **k: pytest.fail("simulated"))
     monkeypatch.setattr("mechsys.load", lambda *a, **k: pytest.fail("loaded"))
     r = invoke(args[0], SYSTEMS / "double_pendulum.yaml", *args[1:])
     assert r.exit_code == 2, r.output + r.stderr

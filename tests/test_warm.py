@@ -1,4 +1,4 @@
-"""Warm start of `mechsys simulate` (analysis/warm.py): a repeated run reuses a plan keyed by the file's bytes and
+"""Warm start of `mechsys simulate` (analysis/motion/warm.py): a repeated run reuses a plan keyed by the file's bytes and
 options, gives byte-identical results, and never imports sympy, pydantic's model or scipy.integrate."""
 from __future__ import annotations
 

@@ -11,12 +11,12 @@ the joint point), ``link.com``, ``link.NAME``, ``ground.NAME``. ``system`` means
 | angular_momentum(L or system [, P]) | sum of (r_G - r_P) x m v_G + R I omega, about P (default: the ground origin) |
 | kinetic_energy(L or system) | T |
 | momentum_of(q) | the generalized momentum dT/d(der(q)) |
-| reaction(L[, K]) | (Fx, Fy, Fz, Mx, My, Mz): the wrench L's joint transmits to L's subtree (analysis/reactions.py); in the axes of link K if given |
+| reaction(L[, K]) | (Fx, Fy, Fz, Mx, My, Mz): the wrench L's joint transmits to L's subtree (analysis/motion/reactions.py); in the axes of link K if given |
 | constraint_force(C[, K]) | the force a point_on_point or rolling constraint C applies at its (first) point; in the axes of link K if given |
 | multiplier(ROW) | the Lagrange multiplier of one constraint row (M q'' = f + A^T lambda), e.g. crank_pin.x |
 
 Accelerations (acceleration(P), der(der(q))) contain the acceleration symbols of the coordinates; the
-evaluation along a motion (analysis/outputs.py) supplies them from the equations of motion. Multipliers and
+evaluation along a motion (analysis/motion/outputs.py) supplies them from the equations of motion. Multipliers and
 reactions are not expressions of the state: they enter as placeholder symbols (``ModelQuantities.deferred``)
 whose values the evaluation computes at each time from the multipliers and the Newton-Euler wrenches.
 """

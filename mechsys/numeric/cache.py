@@ -135,7 +135,8 @@ def code_fingerprint() -> str:
         files = [f for sub in ("model", "mechanics", "numeric") for f in sorted((root / sub).glob("*.py"))]
         files += sorted((root / "numeric").glob("*.c"))  # the native integrator template
         # the analyses that generate code of their own define what their entries hold
-        files += [root / "analysis" / name for name in ("simulate.py", "reactions.py", "nonholonomic.py")]
+        files += [root / "analysis" / name for name in ("motion/simulate.py", "motion/reactions.py",
+                                                        "equilibrium/nonholonomic.py")]
         for f in files:
             digest.update(f.read_bytes())
         _FINGERPRINT = digest.hexdigest()[:16]

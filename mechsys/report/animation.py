@@ -129,7 +129,7 @@ def sample_indices(n: int, max_frames: int = MAX_FRAMES) -> np.ndarray:
 
 def evaluate(model, geo: Geometry, t: np.ndarray, q: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """World positions (frames, points, 3) and link angular velocities (frames, links, 3) at the given states."""
-    from mechsys.analysis.equilibria import parameter_values
+    from mechsys.numeric.parameters import parameter_values
     from mechsys.numeric.lambdify import compile_matrix
 
     p = parameter_values(model)

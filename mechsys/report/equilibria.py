@@ -3,8 +3,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from mechsys.analysis.equilibria import EquilibriaResult
-from mechsys.analysis.linearize import Linearization
+from mechsys.analysis.equilibrium.equilibria import EquilibriaResult
+from mechsys.analysis.equilibrium.linearize import Linearization
 from mechsys.report.tables import Table, fmt_number
 
 
@@ -51,9 +51,9 @@ def equilibria_tables(result: EquilibriaResult) -> list[Table]:
 
 
 def verification_table(result: EquilibriaResult, verifications: list) -> Table:
-    """--verify: the motion from small perturbations of each equilibrium against its verdict (analysis/verify.py);
+    """--verify: the motion from small perturbations of each equilibrium against its verdict (analysis/equilibrium/verify.py);
     a disagreement is a note in capitals that names the equilibrium, the verdict and the motion."""
-    from mechsys.analysis.verify import disagreements
+    from mechsys.analysis.equilibrium.verify import disagreements
 
     t = Table("verification (perturbed motions)", ["#", "stability", "perturbed motion", "agrees"])
     for k, v in enumerate(verifications, start=1):
@@ -106,7 +106,7 @@ def hurwitz_tables(lin: Linearization, label: str, reduced_jacobian: np.ndarray 
     """With cyclic coordinates or constraints the polynomial of the reduced state Jacobian (monic) is the one
     stability is about; otherwise det(M s^2 + (C+G) s + K + N) as the book writes it."""
     if reduced_jacobian is not None:
-        from mechsys.analysis.linearize import hurwitz_determinants
+        from mechsys.analysis.equilibrium.linearize import hurwitz_determinants
 
         coeffs = np.real(np.poly(reduced_jacobian))
         n = len(coeffs) - 1
@@ -173,7 +173,7 @@ def modes_tables(modes) -> list[Table]:
 
 
 def steady_linearization_tables(lin, label: str, independent: list[str] | None, hurwitz: bool) -> list[Table]:
-    """Nonholonomic steady motion (analysis/nonholonomic.py): Kane's M, C, K over the independent speeds, the
+    """Nonholonomic steady motion (analysis/equilibrium/nonholonomic.py): Kane's M, C, K over the independent speeds, the
     kinematic rows, the first-order A and B; with --independent, the second-order form over those coordinates."""
     from mechsys.errors import AnalysisError
 

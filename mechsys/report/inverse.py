@@ -3,8 +3,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from mechsys.analysis.inverse import Instant
-from mechsys.analysis.reactions import COMPONENTS
+from mechsys.analysis.motion.inverse import Instant
+from mechsys.analysis.motion.reactions import COMPONENTS
 from mechsys.report.tables import Table
 
 

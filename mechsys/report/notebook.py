@@ -8,9 +8,9 @@ import numpy as np
 from mechsys.report.tables import Table, to_markdown
 
 if TYPE_CHECKING:
-    from mechsys.analysis.equilibria import EquilibriaResult
-    from mechsys.analysis.modes import Modes
-    from mechsys.analysis.simulate import SimulationResult
+    from mechsys.analysis.equilibrium.equilibria import EquilibriaResult
+    from mechsys.analysis.equilibrium.modes import Modes
+    from mechsys.analysis.motion.simulate import SimulationResult
     from mechsys.mechanics.model import Equations, MechanicalModel
 
 #: The one line an ImportError carries when pandas is missing.

@@ -186,7 +186,7 @@ def scene(model) -> Scene:
 
 def evaluate_scene(model, sc: Scene, t: np.ndarray, q: np.ndarray, u: np.ndarray) -> Motion:
     """Points, frame origins and rotations at the given states (one compiled function for all of them)."""
-    from mechsys.analysis.equilibria import parameter_values
+    from mechsys.numeric.parameters import parameter_values
     from mechsys.numeric.lambdify import compile_matrix
 
     n, links = sc.geometry.positions.shape[1], len(sc.links)
@@ -542,7 +542,7 @@ def write_run_view(model, result, path: str | os.PathLike, fps: float | None = N
 def initial_configuration(model) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(t, q, u) of the file's initial state, as `simulate` starts it: assembled onto the holonomic constraints
     (loop closures) when there are any, as the file gives it otherwise."""
-    from mechsys.analysis.simulate import check_on_manifold, file_state, initial_state
+    from mechsys.analysis.motion.simulate import check_on_manifold, file_state, initial_state
 
     if any(row.kind == "holonomic" for row in model.kin.constraints):
         c, p, y0 = initial_state(model)

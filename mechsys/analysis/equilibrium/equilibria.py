@@ -12,50 +12,16 @@ import sympy as sp
 from mechsys.errors import AnalysisError, InputError
 from mechsys.mechanics.model import MechanicalModel
 from mechsys.numeric.lambdify import compile_exprs
+from mechsys.numeric.parameters import parameter_values
 
 if TYPE_CHECKING:
-    from mechsys.analysis.exhaustive import Exhaustive
+    from mechsys.analysis.equilibrium.exhaustive import Exhaustive
 
 
 def wrap(angle: float) -> float:
     """An angle in (-pi, pi]."""
     a = math.remainder(angle, 2 * math.pi)
     return math.pi if a == -math.pi else a + 0.0  # no negative zero
-
-
-def parameter_values(model: MechanicalModel, changes: dict[str, float] | None = None) -> np.ndarray:
-    """Numeric parameter vector (model.parameter_symbols order) with some parameters set to new values; the
-    parameters defined from them follow (dM = Mo/7 moves with Mo)."""
-    doc = model.doc
-    if not changes:
-        return np.array([doc.parameter_values[n] for n in doc.parameters], dtype=float)
-    values = {sym: doc.parameter_values[name] for name, sym in doc.parameters.items()}
-    for name in changes:
-        values[doc.parameters[name]] = float(changes[name])
-    for name, expr in _followers(doc, frozenset(changes)):  # in dependency order
-        # sympy Floats, not Python floats: for an alias ``m1: m2`` the xreplace returns the value itself
-        known = {s: sp.Float(values[s]) for s in expr.free_symbols if s in values}
-        values[doc.parameters[name]] = float(sp.sympify(expr.xreplace(known)).evalf())
-    return np.array([float(values[s]) for s in model.parameter_symbols], dtype=float)
-
-
-def _followers(doc, changed: frozenset[str]) -> list[tuple[str, sp.Expr]]:
-    """The parameters defined (directly or not) from the changed ones, in dependency order; remembered per set of
-    names on the document (a continuation sets the same parameter thousands of times). The memo belongs to the
-    document's definitions: a copy with other definitions (with_overrides) gets its own."""
-    owner, memo = doc.__dict__.get("_parameter_followers", (None, {}))
-    if owner is not doc.parameter_exprs:
-        memo = {}
-        doc.__dict__["_parameter_followers"] = (doc.parameter_exprs, memo)
-    if changed not in memo:
-        moved = {doc.parameters[name] for name in changed}
-        out = []
-        for name, expr in doc.parameter_exprs.items():
-            if name not in changed and expr.free_symbols & moved:
-                moved.add(doc.parameters[name])
-                out.append((name, expr))
-        memo[changed] = out
-    return memo[changed]
 
 
 @dataclass
@@ -93,7 +59,7 @@ class EquilibriaResult:
     cyclic: list[str] = field(default_factory=list)
     fixed_rates: dict[str, float] = field(default_factory=dict)
     search: SearchReport | None = None
-    exhaustive: Exhaustive | None = None  # what the exhaustive mode computed (analysis/exhaustive.py)
+    exhaustive: Exhaustive | None = None  # what the exhaustive mode computed (analysis/equilibrium/exhaustive.py)
     formulation: str = ""  # nonholonomic: independent speeds, eliminated and ignorable coordinates
 
     def _repr_markdown_(self) -> str:
@@ -295,7 +261,7 @@ class EquilibriumProblem:
     def split_singularity(self, z: np.ndarray, p: np.ndarray) -> str | None:
         """Why the coordinates the analysis eliminates are not determined at z (a coordinate singularity of the
         model, not a steady motion one can linearize about), or None. Only systems with velocity constraints
-        eliminate coordinates and speeds (analysis/nonholonomic.py); gimbal locks are charts.py's."""
+        eliminate coordinates and speeds (analysis/equilibrium/nonholonomic.py); gimbal locks are charts.py's."""
         return None
 
     def equilibrium(self, z: np.ndarray) -> Equilibrium:
@@ -318,22 +284,31 @@ def _newton(problem: EquilibriumProblem, z: np.ndarray, p: np.ndarray, roots: li
     """Deflated Newton (Farrell et al.): roots already found repel the iteration; backtracking on |G|."""
     n = len(z)
 
-    ang = problem.is_angle()
+    ang = np.flatnonzero(problem.is_angle())
     known = np.array(roots, dtype=float).reshape(len(roots), n)
+
+    def distances(z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """z - r for every root found (angles on the circle) and the squared distances."""
+        d = z - known
+        if len(ang):
+            d[:, ang] = np.remainder(d[:, ang] + np.pi, 2 * np.pi) - np.pi
+        return d, np.maximum(np.einsum("ij,ij->i", d, d), 1e-28)
 
     def deflation(z: np.ndarray) -> tuple[float, np.ndarray]:
         """mu = prod(1/|z - r|^2 + 1) over the roots found, and grad log mu (one array operation for all roots)."""
         if not len(known):
             return 1.0, np.zeros(n)
-        d = z - known
-        d[:, ang] = np.remainder(d[:, ang] + np.pi, 2 * np.pi) - np.pi
-        d2 = np.maximum(np.einsum("ij,ij->i", d, d), 1e-28)
+        d, d2 = distances(z)
         factor = 1.0 / d2 + 1.0
         return float(np.prod(factor)), (-2.0 * d / (d2**2 * factor)[:, None]).sum(axis=0)
 
     def G_only(z: np.ndarray) -> float:
+        """|mu F| for the line search (mu only: no gradient)."""
         F = problem.F(z, p)
-        return float(np.linalg.norm(deflation(z)[0] * F)) if np.all(np.isfinite(F)) else np.inf
+        if not np.all(np.isfinite(F)):
+            return np.inf
+        mu = float(np.prod(1.0 / distances(z)[1] + 1.0)) if len(known) else 1.0
+        return float(np.linalg.norm(mu * F))
 
     stalls = 0
     for _ in range(max_iter):
@@ -594,7 +569,7 @@ def _multiplier_guess(problem: EquilibriumProblem, start: np.ndarray, p: np.ndar
 
 @dataclass
 class SteadyOptions:
-    """How the steady motions of a nonholonomic system are posed (analysis/nonholonomic.py): coordinates held at
+    """How the steady motions of a nonholonomic system are posed (analysis/equilibrium/nonholonomic.py): coordinates held at
     their file values (--given), given rates of families freed as unknowns (--solve), coordinates whose rates
     must be independent speeds (--independent)."""
 
@@ -608,14 +583,14 @@ class SteadyOptions:
 
 def make_problem(model: MechanicalModel, options: SteadyOptions | None = None) -> EquilibriumProblem:
     """The steady-motion equations of a model: holonomic (this module) or with velocity constraints
-    (analysis/nonholonomic.py)."""
+    (analysis/equilibrium/nonholonomic.py)."""
     options = options or SteadyOptions()
     if model.is_holonomic:
         if options:
             raise InputError("--given, --solve and --independent pose the steady motions of nonholonomic systems "
                              "(velocity constraints such as rolling); this model is holonomic")
         return EquilibriumProblem(model)
-    from mechsys.analysis.nonholonomic import NonholonomicProblem
+    from mechsys.analysis.equilibrium.nonholonomic import NonholonomicProblem
 
     return NonholonomicProblem(model, options.given, options.solve, options.independent)
 
@@ -624,9 +599,9 @@ def find_equilibria(model: MechanicalModel, search: dict[str, tuple[float, float
                     starts: int | None = None, seed: int = 0, exhaustive: bool = False,
                     options: SteadyOptions | None = None) -> EquilibriaResult:
     """Equilibria (and steady motions of cyclic coordinates) with their Lyapunov stability. exhaustive: every
-    isolated root of polynomial sin/cos equations (analysis/exhaustive.py) instead of the multistart (search is
+    isolated root of polynomial sin/cos equations (analysis/equilibrium/exhaustive.py) instead of the multistart (search is
     then not used)."""
-    from mechsys.analysis.stability import assess
+    from mechsys.analysis.equilibrium.stability import assess
 
     problem = make_problem(model, options)
     if exhaustive and not model.is_holonomic:
@@ -637,13 +612,13 @@ def find_equilibria(model: MechanicalModel, search: dict[str, tuple[float, float
         return _every_state(problem, p, search)
     exact = None
     if exhaustive:
-        from mechsys.analysis.exhaustive import exhaustive_search
+        from mechsys.analysis.equilibrium.exhaustive import exhaustive_search
 
         roots, plan, exact = exhaustive_search(problem, p, starts, seed)
     else:
         plan = search_plan(problem, search, starts)
         roots = solve_equilibria(problem, p, search, starts, seed, plan)
-    from mechsys.analysis.charts import review, singularities
+    from mechsys.analysis.equilibrium.charts import review, singularities
 
     dropped: dict[str, list[np.ndarray]] = {}
     roots = drop_singular(problem, roots, p, dropped)
@@ -687,7 +662,7 @@ def _every_state(problem: EquilibriumProblem, p: np.ndarray, search: dict | None
     """No unknowns: every coordinate is cyclic and nothing acts on it at rest (free carriages, a free rotor), so
     each configuration is a steady motion at the rates the file gives (an equilibrium when they are zero). One
     representative, its stability (of the rates), and a message that says so."""
-    from mechsys.analysis.stability import assess
+    from mechsys.analysis.equilibrium.stability import assess
 
     _boxes(problem, search)  # an unknown --search name is still an input error
     model = problem.model

@@ -28,7 +28,8 @@ from functools import cached_property
 import numpy as np
 import sympy as sp
 
-from mechsys.analysis.equilibria import Equilibrium, EquilibriumProblem, parameter_values, wrap
+from mechsys.analysis.equilibrium.equilibria import Equilibrium, EquilibriumProblem, wrap
+from mechsys.numeric.parameters import parameter_values
 from mechsys.errors import AnalysisError, InputError
 from mechsys.mechanics.model import MechanicalModel
 from mechsys.numeric import native

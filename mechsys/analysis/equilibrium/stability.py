@@ -7,7 +7,7 @@ import numpy as np
 import scipy.linalg as sla
 import sympy as sp
 
-from mechsys.analysis.linearize import pieces, state_at
+from mechsys.analysis.equilibrium.linearize import pieces, state_at
 from mechsys.numeric.lambdify import compile_exprs
 
 #: Real parts with |Re| <= ZERO_RE * max(1, max |eigenvalue|) count as zero (critical case).
@@ -20,7 +20,7 @@ def reduced_pencil(problem, e) -> tuple[np.ndarray, np.ndarray, np.ndarray | Non
     """(A, B) with B x' = A x for the reduced linearized state, and N (tangent basis) for constrained systems.
 
     Unconstrained: state (non-cyclic q, all rates). Constrained: state (eta, eta') with q = q0 + N eta.
-    Nonholonomic problems have their own (analysis/nonholonomic.py)."""
+    Nonholonomic problems have their own (analysis/equilibrium/nonholonomic.py)."""
     if hasattr(problem, "pencil"):
         return problem.pencil(e)
     model = problem.model
@@ -47,7 +47,7 @@ def reduced_pencil(problem, e) -> tuple[np.ndarray, np.ndarray, np.ndarray | Non
 def problem_parameters(problem) -> np.ndarray:
     p = getattr(problem, "current_parameters", None)
     if p is None:
-        from mechsys.analysis.equilibria import parameter_values
+        from mechsys.numeric.parameters import parameter_values
 
         p = parameter_values(problem.model)
     return p

@@ -6,10 +6,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from mechsys.analysis.equilibria import EquilibriaResult, Equilibrium, EquilibriumProblem, parameter_values
-from mechsys.analysis.linearize import state_at
-from mechsys.analysis.simulate import compile_model, simulate
-from mechsys.analysis.stability import ZERO_RE, reduced_pencil
+from mechsys.analysis.equilibrium.equilibria import EquilibriaResult, Equilibrium, EquilibriumProblem
+from mechsys.numeric.parameters import parameter_values
+from mechsys.analysis.equilibrium.linearize import state_at
+from mechsys.analysis.motion.simulate import compile_model, simulate
+from mechsys.analysis.equilibrium.stability import ZERO_RE, reduced_pencil
 from mechsys.errors import AnalysisError, InputError
 from mechsys.mechanics.model import MechanicalModel
 
@@ -290,7 +291,7 @@ def verify_equilibrium(model: MechanicalModel, e: Equilibrium, options: VerifyOp
     out.growth = max(r.final for r in out.runs)
     out.peak = max(r.peak for r in out.runs)
     out.agrees, note = agreement(e.stability, out.observed, e.eigenvalues, e.critical, not h.clamped)
-    from mechsys.analysis.charts import singularities
+    from mechsys.analysis.equilibrium.charts import singularities
 
     chart = singularities(model, e.coordinates, p)
     if chart and out.agrees is not None:

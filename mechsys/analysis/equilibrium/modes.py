@@ -6,8 +6,9 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.linalg as sla
 
-from mechsys.analysis.equilibria import Equilibrium, EquilibriumProblem, _polish, find_equilibria, parameter_values
-from mechsys.analysis.linearize import Linearization, linearize
+from mechsys.analysis.equilibrium.equilibria import Equilibrium, EquilibriumProblem, _polish, find_equilibria
+from mechsys.numeric.parameters import parameter_values
+from mechsys.analysis.equilibrium.linearize import Linearization, linearize
 from mechsys.errors import AnalysisError, InputError
 from mechsys.mechanics.model import MechanicalModel
 
@@ -107,10 +108,10 @@ def _equilibrium(model: MechanicalModel, at: dict[str, float] | None) -> Equilib
     z = _polish(problem, start, p)
     if z is None or problem.distance(z, start) > 1e-6 * (1 + np.linalg.norm(start)):
         raise AnalysisError("--at is not an equilibrium (the equilibrium equations are not satisfied there)")
-    from mechsys.analysis.stability import assess
+    from mechsys.analysis.equilibrium.stability import assess
 
     e = problem.equilibrium(z)
-    from mechsys.analysis.charts import singularities
+    from mechsys.analysis.equilibrium.charts import singularities
 
     found = singularities(model, e.coordinates, p)
     if found:
@@ -196,13 +197,13 @@ def vibration_modes(model: MechanicalModel, at: dict[str, float] | None = None, 
 
 
 def steady_modes(model: MechanicalModel, at: dict[str, float] | None = None, options=None) -> Modes:
-    """Modes of a nonholonomic steady motion (analysis/nonholonomic.py): one per eigenvalue of the reduced
+    """Modes of a nonholonomic steady motion (analysis/equilibrium/nonholonomic.py): one per eigenvalue of the reduced
     linearization with Im >= 0 (structural zeros apart), natural frequency |lambda|, damping ratio -Re/|lambda|
     (real roots: +-1), shapes on the independent shape coordinates (the eigenvector turned so that its largest
     component is real and positive, then its real part; normalised to 1)."""
-    from mechsys.analysis.equilibria import make_problem
-    from mechsys.analysis.nonholonomic import linearize_steady
-    from mechsys.analysis.stability import assess
+    from mechsys.analysis.equilibrium.equilibria import make_problem
+    from mechsys.analysis.equilibrium.nonholonomic import linearize_steady
+    from mechsys.analysis.equilibrium.stability import assess
 
     problem = make_problem(model, options)
     p = parameter_values(model)

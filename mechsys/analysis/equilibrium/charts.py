@@ -9,7 +9,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from mechsys.analysis.equilibria import Equilibrium, EquilibriumProblem, parameter_values
+from mechsys.analysis.equilibrium.equilibria import Equilibrium, EquilibriumProblem
+from mechsys.numeric.parameters import parameter_values
 from mechsys.numeric.lambdify import compile_exprs
 from mechsys.numeric.rotations import alternatives, angles_of, canonical, rate_matrix, ratio, rotation
 
@@ -92,7 +93,7 @@ def reclassify(problem: EquilibriumProblem, e: Equilibrium, where: Singularity, 
     Returns the steady motion's identity there (sequence, rounded state): roots of the singular chart that are
     one steady motion share it. None when it is not a steady motion there (an artefact of the singular chart).
     Raises Unchartable with the reason when no regular chart can be used."""
-    from mechsys.analysis.stability import assess
+    from mechsys.analysis.equilibrium.stability import assess
 
     if where.sequence is None:
         raise Unchartable("only spherical and free joints can be re-charted (another rotation sequence)")

@@ -11,7 +11,7 @@ import numpy as np
 from mechsys.errors import AnalysisError, InputError
 from mechsys.numeric.native import BUDGET_SPENT
 
-if TYPE_CHECKING:  # sympy and the model are imported only where used: a warm run (analysis/warm.py) needs neither
+if TYPE_CHECKING:  # sympy and the model are imported only where used: a warm run (motion/warm.py) needs neither
     from mechsys.mechanics.model import MechanicalModel
 
 METHODS = ("auto", "native", "CVODE", "RK45", "DOP853", "Radau", "BDF", "LSODA")
@@ -169,7 +169,7 @@ class SimulationResult:
     driving: dict = field(default_factory=dict)  # prescribed coordinate -> driving force/torque at each output
     events: list[dict] = field(default_factory=list)  # {"t", "event", "state": {...}} in time order
     impacts: list[dict] = field(default_factory=list)  # {"t", "contact", "impulse", "rates_before", ...}
-    outputs: dict = field(default_factory=dict)  # the file's `outputs:` column -> values (analysis/outputs.py)
+    outputs: dict = field(default_factory=dict)  # the file's `outputs:` column -> values (analysis/motion/outputs.py)
     work: np.ndarray | None = None  # work of the non-conservative forces since t = 0 (None: conservative run)
 
     @property
@@ -323,7 +323,7 @@ def file_state(model: MechanicalModel) -> tuple[np.ndarray, np.ndarray]:
 
 def initial_state(model: MechanicalModel) -> tuple[Compiled, np.ndarray, np.ndarray]:
     """(compiled code, parameter values, consistent initial state y0 = (q0, u0)), as ``simulate`` starts."""
-    from mechsys.analysis.equilibria import parameter_values
+    from mechsys.numeric.parameters import parameter_values
 
     c = compile_model(model)
     p = parameter_values(model)
@@ -515,7 +515,7 @@ def choose_method(rhs: RightHandSide, t0: float, y0: np.ndarray, t_end: float,
 
 def cvode_usable(c: Compiled, required: bool) -> bool:
     """SUNDIALS CVODE (scikit-sundae) for this scene: installed, and no contacts (the impact loop uses scipy)."""
-    from mechsys.analysis import sundials
+    from mechsys.analysis.motion import sundials
 
     why = None
     if not sundials.available():
@@ -530,10 +530,10 @@ def cvode_usable(c: Compiled, required: bool) -> bool:
 def ivp_solver(chosen: str):
     """solve_ivp, or CVODE behind the same call signature (the subset simulate uses)."""
     if chosen != "CVODE":
-        from mechsys.analysis.events import solve_ivp  # events located inside steps, not only at step ends
+        from mechsys.analysis.motion.events import solve_ivp  # events located inside steps, not only at step ends
 
         return solve_ivp
-    from mechsys.analysis import sundials
+    from mechsys.analysis.motion import sundials
 
     def cvode(fun, t_span, y0, method=None, rtol=1e-10, atol=1e-12, t_eval=None, events=None):
         return sundials.integrate(fun, t_span, y0, t_eval=t_eval, rtol=rtol, atol=atol, events=events)
@@ -752,7 +752,7 @@ def simulate(model: MechanicalModel, t_end: float, dt: float | None = None, meth
         raise InputError(f"--method: unknown method {method!r}; use one of {', '.join(METHODS)}")
     if t_end <= 0:
         raise InputError("--t-end must be positive")
-    from mechsys.analysis.equilibria import parameter_values
+    from mechsys.numeric.parameters import parameter_values
 
     timings = {}
     t0 = time.perf_counter()
@@ -819,7 +819,7 @@ def simulate(model: MechanicalModel, t_end: float, dt: float | None = None, meth
     if Y is not None:
         grid = grid[:len(Y)]
     elif c.gap_names:
-        from mechsys.analysis.impacts import integrate_with_impacts
+        from mechsys.analysis.impact.impacts import integrate_with_impacts
 
         grid, Y, steps, impacts, _stopped = integrate_with_impacts(model, c, rhs, p, grid, y0, chosen, rtol, atol,
                                                                     event_fns, note_events, capture_velocity)

@@ -5,7 +5,7 @@ The plan holds only what the native path reads: coordinate names, parameter and 
 decay rate (auto's stiffness decision is redone for the new t_end), the generated source of T and V (and of the
 constraint rows that projection reads), the rotation charts to watch, and the path of the compiled library. Scenes
 with events, contacts or drives (whose forces need the Python equations) always take the full path, and so does a
-warm run that comes near a gimbal lock of a watched chart (the full path switches charts: analysis/charted.py).
+warm run that comes near a gimbal lock of a watched chart (the full path switches charts: analysis/motion/charted.py).
 Any change to the file, the options, mechsys or its code gives a new key. A plan is used only when it verifies
 (numeric/cache.py: owner, signature) and is consistent with the library it names (sizes of every array, the
 library's own signature); otherwise, and whenever MECHSYS_NATIVE=off, the run takes the full (cold) path, which
@@ -20,7 +20,7 @@ from typing import Callable, Optional, Sequence
 
 import numpy as np
 
-from mechsys.analysis.simulate import SimulationResult
+from mechsys.analysis.motion.simulate import SimulationResult
 from mechsys.numeric import cache
 
 STIFF_STEPS = 5e4  # the same threshold as simulate.choose_method
@@ -45,7 +45,7 @@ def plan_key(path: Path, overrides: Sequence[str]) -> Optional[str]:
 def _load_plan(plan: dict) -> Optional[tuple]:
     """(integrator, Compiled, p, y0) from a verified plan, or None when anything in it is inconsistent: the
     library must verify and agree with every array (the C code reads them by position)."""
-    from mechsys.analysis.simulate import Compiled
+    from mechsys.analysis.motion.simulate import Compiled
     from mechsys.numeric.native import NativeIntegrator
     from mechsys.numeric.runtime import matrix_from_source
 
@@ -95,7 +95,8 @@ def run_planned(path: Path, overrides: Sequence[str], t_end: float, dt: Optional
     nat, c, p, y0 = loaded
     if method == "auto" and plan["decay_rate"] * t_end > STIFF_STEPS:
         return None  # stiff over this horizon: the full path chooses an implicit method
-    from mechsys.analysis.simulate import constraint_residual, native_projected, nonconservative_work, output_grid
+    from mechsys.analysis.motion.simulate import (constraint_residual, native_projected, nonconservative_work,
+                                                  output_grid)
 
     n, m = c.n, c.m
     load_seconds = time.perf_counter() - t0
@@ -113,7 +114,7 @@ def run_planned(path: Path, overrides: Sequence[str], t_end: float, dt: Optional
     seconds = time.perf_counter() - t1
     q, u = Y[:, :n], Y[:, n:]
     if plan["charts"]:
-        from mechsys.analysis.charted import regular_run
+        from mechsys.analysis.motion.charted import regular_run
 
         if not regular_run(plan["charts"], grid, q, u):
             return None  # near a gimbal lock: the full path integrates that stretch in another sequence
@@ -135,9 +136,9 @@ def remember(path: Path, overrides: Sequence[str], model, result: SimulationResu
     drives = any(con.name.startswith("drive(") for con in model.kin.constraints)  # need the multipliers
     if key is None or result.method != "native" or drives or model.events or model.kin.contacts:
         return
-    from mechsys.analysis.charted import NOTES, regular_run, watched
-    from mechsys.analysis.equilibria import parameter_values
-    from mechsys.analysis.simulate import RightHandSide, compile_model, stiffness
+    from mechsys.analysis.motion.charted import NOTES, regular_run, watched
+    from mechsys.numeric.parameters import parameter_values
+    from mechsys.analysis.motion.simulate import RightHandSide, compile_model, stiffness
 
     charts = [[seq, list(idx)] for _link, _kind, seq, idx in watched(model)]
     if charts and not regular_run(charts, result.t[:1], result.q[:1], result.u[:1]):
@@ -174,10 +175,10 @@ def simulate_file(path: Path, overrides: Sequence[str], t_end: float, dt: Option
     """What `mechsys simulate FILE` runs: (result, model or None). A repeated run of the same file and options
     starts from its plan (no model is built, so None) unless ``need_model`` (reactions, animations); otherwise the
     model is loaded with prescribed coordinates released into drives (their driving forces become outputs),
-    simulated (through gimbal locks: analysis/charted.py), and its plan remembered. The timings gain "load":
+    simulated (through gimbal locks: analysis/motion/charted.py), and its plan remembered. The timings gain "load":
     everything not derivation or integration."""
-    from mechsys.analysis.charted import simulate_charted
-    from mechsys.analysis.outputs import add_outputs
+    from mechsys.analysis.motion.charted import simulate_charted
+    from mechsys.analysis.motion.outputs import add_outputs
 
     t0 = time.perf_counter()
     need_model = need_model or declares_outputs(path)  # outputs are evaluated on the model

@@ -12,8 +12,8 @@ import numpy as np
 from mechsys.errors import AnalysisError
 from mechsys.numeric.rotations import alternatives, angles_closed, angles_near, frame, rate_matrix, ratio_at
 
-if TYPE_CHECKING:  # the warm path (analysis/warm.py) imports this module and must not import sympy
-    from mechsys.analysis.simulate import SimulationResult
+if TYPE_CHECKING:  # the warm path (analysis/motion/warm.py) imports this module and must not import sympy
+    from mechsys.analysis.motion.simulate import SimulationResult
     from mechsys.mechanics.model import MechanicalModel
 
 
@@ -75,8 +75,8 @@ def watched(model: MechanicalModel) -> list[tuple]:
     switch is needed (``_autonomous``)."""
     memo = model.__dict__.get("_charted_watch")
     if memo is None:
-        from mechsys.analysis.charts import rotation_joints
-        from mechsys.analysis.simulate import rotation_charts
+        from mechsys.analysis.equilibrium.charts import rotation_joints
+        from mechsys.analysis.motion.simulate import rotation_charts
 
         charts = rotation_charts(model)
         links = {c[0] for c in charts}
@@ -198,8 +198,8 @@ class _Charted:
                 self.block[j] = self.block[j + 1]
 
     def chart_model(self, charts: list[str]) -> MechanicalModel:
-        from mechsys.analysis.charts import _chart_model
-        from mechsys.analysis.simulate import compile_model
+        from mechsys.analysis.equilibrium.charts import _chart_model
+        from mechsys.analysis.motion.simulate import compile_model
 
         m = self.model
         for (link, _kind, user, _idx), seq in zip(self.joints, charts):
@@ -322,13 +322,13 @@ def simulate_charted(model: MechanicalModel, t_end: float, dt: Optional[float] =
     through gimbal lock"). A run that never comes near a singular chart is ``simulate``'s own result, unchanged;
     otherwise it continues from the last good output row in look-ahead windows, each a ``simulate`` run from
     t = 0 of the model re-derived in the joint's best-conditioned sequence, with its times shifted."""
-    from mechsys.analysis.simulate import (CVODE_TIGHTENING, EVALUATIONS_PER_STEP, METHODS, SimulationResult,
+    from mechsys.analysis.motion.simulate import (CVODE_TIGHTENING, EVALUATIONS_PER_STEP, METHODS, SimulationResult,
                                            file_state, output_grid, simulate)
 
     joints = watched(model) if method in METHODS and t_end > 0 else []
     if not joints:
         return simulate(model, t_end, dt, method, rtol, atol, overrides_p, capture_velocity, progress, max_steps)
-    from mechsys.analysis.equilibria import parameter_values
+    from mechsys.numeric.parameters import parameter_values
     from mechsys.numeric.native import BUDGET_SPENT
 
     started = time.perf_counter()
@@ -437,7 +437,7 @@ def simulate_charted(model: MechanicalModel, t_end: float, dt: Optional[float] =
     timings["re-charting"] = max(0.0, time.perf_counter() - started - totals["seconds"])
     out = SimulationResult(list(model.coordinates), grid, state.Q, state.U, state.T, state.V, np.zeros(len(grid)),
                            tol["method"], totals["rhs"], totals["steps"], timings, warnings + notes)
-    from mechsys.analysis.simulate import compile_model, nonconservative_work
+    from mechsys.analysis.motion.simulate import compile_model, nonconservative_work
 
     with np.errstate(all="ignore"):  # the work rate in the file's angles, finite off the lock itself
         work = nonconservative_work(compile_model(model), p, grid, state.Q, state.U)

@@ -72,10 +72,10 @@ def _interpolant(solver, t1: float) -> Callable:
 def _located_run(solver, t0: float, t1: float, y0: np.ndarray, grid: np.ndarray | None, events: Sequence[Callable],
                  out: dict) -> tuple[int, int, str, int]:
     """CVODE one internal step at a time, the events located inside every step on CVODE's interpolant by
-    mechsys.analysis.events (CVODE's own root finder looks at the signs at step ends only and steps over a pair of
+    mechsys.analysis.motion.events (CVODE's own root finder looks at the signs at step ends only and steps over a pair of
     crossings closer together than a step). Fills out["ts"], ["ys"], ["t_ev"], ["y_ev"]; returns (status, flag,
     message, steps)."""
-    from mechsys.analysis.events import crossings, event_settings
+    from mechsys.analysis.motion.events import crossings, event_settings
 
     limits, directions = event_settings(events)
     counts = np.zeros(len(events))

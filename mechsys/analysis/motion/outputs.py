@@ -6,7 +6,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 if TYPE_CHECKING:  # not at run time: the warm path of `simulate` imports this module without sympy
-    from mechsys.analysis.simulate import SimulationResult
+    from mechsys.analysis.motion.simulate import SimulationResult
     from mechsys.mechanics.model import MechanicalModel
 
 
@@ -14,7 +14,7 @@ def add_outputs(model: MechanicalModel, result: SimulationResult) -> SimulationR
     """``result`` with the file's outputs (at the model's parameter values) as ``result.outputs``."""
     import time
 
-    from mechsys.analysis.equilibria import parameter_values
+    from mechsys.numeric.parameters import parameter_values
 
     if model.outputs:
         t0 = time.perf_counter()
@@ -66,7 +66,7 @@ def deferred_values(model: MechanicalModel, t: float, q: np.ndarray, u: np.ndarr
         return []
     wrench = None
     if any(kind == "reaction" for kind, _w, _k in model.deferred_quantities.values()):
-        from mechsys.analysis.reactions import wrenches
+        from mechsys.analysis.motion.reactions import wrenches
 
         wrench = wrenches(model, t, q, u, a, lam, p)
     return [float(lam[k]) if kind == "multiplier" else float(wrench[what][k])
@@ -76,7 +76,7 @@ def deferred_values(model: MechanicalModel, t: float, q: np.ndarray, u: np.ndarr
 def accelerations_along(model: MechanicalModel, result: SimulationResult, p: np.ndarray):
     """(q'', multipliers) from the equations of motion at each output time of ``result``, the resting contacts
     of the run (captured impacts) held as in the run."""
-    from mechsys.analysis.simulate import RightHandSide, compile_model
+    from mechsys.analysis.motion.simulate import RightHandSide, compile_model
 
     c = compile_model(model)
     rhs = RightHandSide(c, np.asarray(p, float))

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from mechsys.analysis.simulate import compile_model, simulate
+from mechsys.analysis.motion.simulate import compile_model, simulate
 from mechsys.mechanics.model import MechanicalModel
 
 

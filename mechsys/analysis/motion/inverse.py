@@ -49,10 +49,10 @@ def inverse_dynamics(model: MechanicalModel, t: float = 0.0) -> Instant:
     previous one, so a driven loop stays on its branch), then q'' and the multipliers from the equations of
     motion, the drives' forces, every joint's reaction and the file's outputs. The free coordinates of a model
     with degrees of freedom keep the file's values: the state at t of a motion is `simulate`'s."""
-    from mechsys.analysis.equilibria import parameter_values
-    from mechsys.analysis.outputs import compile_outputs, deferred_values
-    from mechsys.analysis.reactions import wrenches
-    from mechsys.analysis.simulate import RightHandSide, check_on_manifold, compile_model, file_state, project
+    from mechsys.numeric.parameters import parameter_values
+    from mechsys.analysis.motion.outputs import compile_outputs, deferred_values
+    from mechsys.analysis.motion.reactions import wrenches
+    from mechsys.analysis.motion.simulate import RightHandSide, check_on_manifold, compile_model, file_state, project
 
     c = compile_model(model)
     p = parameter_values(model)

@@ -40,7 +40,7 @@ def search_boxes(value: Any) -> dict[str, tuple[float, float]] | None:
 
 
 def _equilibria(model: MechanicalModel, options: dict) -> Outputs:
-    from mechsys.analysis.equilibria import find_equilibria
+    from mechsys.analysis.equilibrium.equilibria import find_equilibria
 
     res = find_equilibria(model, search_boxes(options.get("search")))
     out: Outputs = {"count": len(res.equilibria),
@@ -56,7 +56,7 @@ def _equilibria(model: MechanicalModel, options: dict) -> Outputs:
 
 
 def _modes(model: MechanicalModel, options: dict) -> Outputs:
-    from mechsys.analysis.modes import vibration_modes
+    from mechsys.analysis.equilibrium.modes import vibration_modes
 
     m = vibration_modes(model, options.get("at"))
     out: Outputs = {"modes": len(m.frequencies)}
@@ -67,8 +67,8 @@ def _modes(model: MechanicalModel, options: dict) -> Outputs:
 
 
 def _simulate(model: MechanicalModel, options: dict) -> Outputs:
-    from mechsys.analysis.charted import simulate_charted
-    from mechsys.analysis.outputs import add_outputs
+    from mechsys.analysis.motion.charted import simulate_charted
+    from mechsys.analysis.motion.outputs import add_outputs
 
     t_end = float(options.get("t_end", 10.0))
     r = add_outputs(model, simulate_charted(model, t_end, options.get("dt"), options.get("method", "auto")))
@@ -90,7 +90,7 @@ def _simulate(model: MechanicalModel, options: dict) -> Outputs:
 
 
 def _bifurcations(model: MechanicalModel, options: dict) -> Outputs:
-    from mechsys.analysis.bifurcation import sweep
+    from mechsys.analysis.equilibrium.bifurcation import sweep
 
     res = sweep(model, str(options["parameter"]), float(options["start"]), float(options["stop"]),
                 int(options.get("points", 61)))
@@ -120,7 +120,7 @@ def _derive(model: MechanicalModel, options: dict) -> Outputs:
 
 
 def _collide(model: MechanicalModel, options: dict) -> Outputs:
-    from mechsys.analysis.collide import resolve
+    from mechsys.analysis.impact.collide import resolve
 
     r = resolve(model, options.get("impact"))
     out: Outputs = {"energy_loss": r.energy_loss}

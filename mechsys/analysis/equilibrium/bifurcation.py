@@ -8,13 +8,14 @@ from typing import Callable
 import numpy as np
 import sympy as sp
 
-from mechsys.analysis.continuation import Branch, Undefined, sweep_parameter
-from mechsys.analysis.equilibria import (EquilibriumProblem, drop_singular, make_problem, parameter_values,
-                                        singular_note, solve_equilibria, wrap)
-from mechsys.analysis.stability import ZERO_RE, assess, eigen, reduced_pencil
+from mechsys.analysis.equilibrium.continuation import Branch, Undefined, sweep_parameter
+from mechsys.analysis.equilibrium.equilibria import (EquilibriumProblem, drop_singular, make_problem, singular_note,
+                                                     solve_equilibria, wrap)
+from mechsys.analysis.equilibrium.stability import ZERO_RE, assess, eigen, reduced_pencil
 from mechsys.errors import AnalysisError, InputError
 from mechsys.mechanics.model import MechanicalModel
 from mechsys.numeric.lambdify import compile_exprs
+from mechsys.numeric.parameters import parameter_values
 
 
 @dataclass
@@ -346,7 +347,7 @@ def _point_verdicts(problem: EquilibriumProblem, branches: list[Branch], at) -> 
     (the eigenvalue test alone drew every conservative branch unstable). Points at a gimbal lock are classified
     in a regular chart as `equilibria` does (charts.py); the branches returned are those made only of points
     that are no steady motion in a regular chart (artefacts of the singular chart)."""
-    from mechsys.analysis.charts import Unchartable, reclassify, singularities
+    from mechsys.analysis.equilibrium.charts import Unchartable, reclassify, singularities
 
     artefacts = []
     for branch in branches:
@@ -373,7 +374,7 @@ def _point_verdicts(problem: EquilibriumProblem, branches: list[Branch], at) -> 
 def _same_family(problem: EquilibriumProblem, a: Branch, b: Branch, at) -> bool:
     """``b`` is ``a`` in other coordinates (a rotation sequence reaches every orientation twice): at a parameter
     value both reached, the same physical steady motion."""
-    from mechsys.analysis.charts import same_motion
+    from mechsys.analysis.equilibrium.charts import same_motion
 
     for pb in b.points:
         pa = next((pt for pt in a.points if abs(pt.p - pb.p) <= 1e-12 * (1 + abs(pb.p))), None)

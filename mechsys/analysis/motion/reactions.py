@@ -28,7 +28,7 @@ from mechsys.mechanics.build import Builder
 from mechsys.mechanics.model import MechanicalModel
 
 if TYPE_CHECKING:
-    from mechsys.analysis.simulate import SimulationResult
+    from mechsys.analysis.motion.simulate import SimulationResult
 
 COMPONENTS = ("Fx", "Fy", "Fz", "Mx", "My", "Mz")
 
@@ -238,7 +238,7 @@ def wrenches(model: MechanicalModel, t: float, q: np.ndarray, u: np.ndarray, a: 
 def reaction_columns(model: MechanicalModel, result: SimulationResult, p: np.ndarray) -> dict[str, np.ndarray]:
     """``reaction(LINK).Fx`` ... ``.Mz`` at every output time of a simulation ``result`` (a SimulationResult of
     this model with parameter vector ``p``): the wrench the parent (or ground) exerts on the link's subtree."""
-    from mechsys.analysis.outputs import accelerations_along
+    from mechsys.analysis.motion.outputs import accelerations_along
 
     names = column_names(model)
     data = np.zeros((len(result.t), len(names)))
@@ -272,7 +272,7 @@ def append_reactions(model: MechanicalModel, result: SimulationResult, names: li
     wall time go into ``result.warnings`` / ``result.timings`` for the summary."""
     import time
 
-    from mechsys.analysis.equilibria import parameter_values
+    from mechsys.numeric.parameters import parameter_values
 
     t0 = time.perf_counter()
     cols = reaction_columns(model, result, parameter_values(model))

@@ -34,7 +34,7 @@ from mechsys.errors import InputError, MechsysError
 EXECUTORS = ("processes", "dask")
 FIXED_TAIL = ("status", "error", "seconds")
 TASK = "task"
-OPTION_KEYS = {  # analysis -> option keys it understands (see mechsys/analysis/tasks.py); others: any key
+OPTION_KEYS = {  # analysis -> option keys it understands (see mechsys/analysis/batch/tasks.py); others: any key
     "simulate": ("t_end", "dt", "method"),
     "equilibria": ("search",),
     "modes": ("at",),
@@ -370,7 +370,7 @@ def run_chunk(spec: dict, chunk: list[tuple[int, dict[str, float]]]) -> list[dic
 
 
 def _run_chunk(spec: dict, chunk: list[tuple[int, dict[str, float]]]) -> list[dict]:
-    from mechsys.analysis.tasks import ANALYSES
+    from mechsys.analysis.batch.tasks import ANALYSES
 
     results = []
     try:

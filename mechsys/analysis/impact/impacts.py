@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from mechsys.analysis.events import solve_ivp  # events located inside steps (near-tangential touches)
+from mechsys.analysis.motion.events import solve_ivp  # events located inside steps (near-tangential touches)
 from mechsys.errors import AnalysisError
 
 
@@ -43,7 +43,7 @@ def _lift_off_functions(rhs, c, p) -> list:
 def contact_state(model, c, p, t: float, q: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(gaps, normal velocities) of the gap contacts at (t, q, u); an AnalysisError naming the contact when its
     geometry is degenerate there (a zero radius: the gap's derivative divides by zero)."""
-    from mechsys.analysis.collide import contact_degeneracy
+    from mechsys.analysis.impact.collide import contact_degeneracy
 
     try:
         with np.errstate(all="ignore"):
@@ -63,7 +63,7 @@ def _segment(rhs, c, p, grid, t, y, t_end, method, rtol, atol, fns, lift_events,
     projected onto the constraints (the outputs inside it too), and again over half the steps when its outputs
     drift off the constraints.
     The result carries the ``reach`` used and where the segment ends (``seg_end``)."""
-    from mechsys.analysis.simulate import inner_rows, segment_end
+    from mechsys.analysis.motion.simulate import inner_rows, segment_end
 
     k = int(np.searchsorted(grid, t + 1e-13 * max(1.0, abs(t)), side="right")) - 1
     while True:
@@ -99,8 +99,8 @@ def integrate_with_impacts(model, c, rhs, p, grid, y0, method, rtol, atol, event
     (a block laid on a table, or after a plastic impact). A persistent contact lifts off when its multiplier
     turns tensile (an event), and a touching contact at rest that opens ends the segment once its gap exceeds a
     small threshold, so that its next closing is an event again."""
-    from mechsys.analysis.collide import joint_impulses, resolve
-    from mechsys.analysis.simulate import PROJECTION_STEPS, check_on_manifold, project
+    from mechsys.analysis.impact.collide import joint_impulses, resolve
+    from mechsys.analysis.motion.simulate import PROJECTION_STEPS, check_on_manifold, project
 
     n = c.n
     impacts: list[dict] = []

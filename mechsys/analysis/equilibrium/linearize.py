@@ -112,7 +112,7 @@ def state_at(model: MechanicalModel, coordinates: dict[str, float], rates: dict[
 def linearize(model: MechanicalModel, equilibrium, p: np.ndarray | None = None) -> Linearization:
     """Linearize about an equilibrium (or steady motion): K + N = -d(f + A^T lambda)/dq, C + G = -df/du,
     split into symmetric and skew-symmetric parts."""
-    from mechsys.analysis.equilibria import parameter_values
+    from mechsys.numeric.parameters import parameter_values
 
     p = parameter_values(model) if p is None else p
     q, u = state_at(model, equilibrium.coordinates, equilibrium.rates)

@@ -14,8 +14,8 @@ from typing import Iterator
 import numpy as np
 import sympy as sp
 
-from mechsys.analysis.equilibria import (EquilibriumProblem, SearchReport, _multiplier_guess, _polish, is_new_root,
-                                         search_plan, solve_equilibria)
+from mechsys.analysis.equilibrium.equilibria import (EquilibriumProblem, SearchReport, _multiplier_guess, _polish,
+                                                     is_new_root, search_plan, solve_equilibria)
 from mechsys.errors import InputError
 
 #: Size limits of the exhaustive mode: unknowns (coordinates and steady rates; the multipliers are eliminated), the

@@ -81,7 +81,7 @@ def _task_key(e: dict) -> str:
 
 def run_group(file: str, expectations: list[dict]) -> list[dict]:
     """Run one analysis (file, analysis, set, options) once and evaluate every expectation that uses it."""
-    from mechsys.analysis.tasks import run_task
+    from mechsys.analysis.batch.tasks import run_task
 
     first = expectations[0]
     t0 = time.perf_counter()

@@ -1,0 +1,1 @@
+"""Equilibrium and stability: steady motions, linearization, modes, continuation and bifurcations."""

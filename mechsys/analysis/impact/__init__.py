@@ -1,0 +1,1 @@
+"""Impact: impulse-momentum collisions, alone and inside simulations."""

@@ -1,0 +1,1 @@
+"""Motion: forward and inverse dynamics, events, output quantities, reactions and integrator studies."""
