@@ -1,10 +1,15 @@
 """Impacts inside a simulation: gap events, the impulse law, sequential impacts and the capture-velocity rest rule."""
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from mechsys.analysis.motion.events import solve_ivp  # events located inside steps (near-tangential touches)
 from mechsys.errors import AnalysisError
+
+if TYPE_CHECKING:
+    from mechsys.analysis.motion.simulate import Integration
 
 
 def _pressed(rhs, t: float, q: np.ndarray, u: np.ndarray, trial: list[int]) -> list[int]:
@@ -57,7 +62,7 @@ def contact_state(model, c, p, t: float, q: np.ndarray, u: np.ndarray) -> tuple[
     return gaps, vn
 
 
-def _segment(rhs, c, p, grid, t, y, t_end, method, rtol, atol, fns, lift_events, h, reach):
+def _segment(job: Integration, t: float, y: np.ndarray, fns: list, lift_events: list, h: float, reach: int):
     """One solve of the impact loop, from (t, y) to t_end or to the first terminal event; for closed loops to an
     output point about ``reach`` steps of size h away (as simulate's closed-loop paths do), where the state is
     projected onto the constraints (the outputs inside it too), and again over half the steps when its outputs
@@ -65,6 +70,8 @@ def _segment(rhs, c, p, grid, t, y, t_end, method, rtol, atol, fns, lift_events,
     The result carries the ``reach`` used and where the segment ends (``seg_end``)."""
     from mechsys.analysis.motion.simulate import inner_rows, segment_end
 
+    c, p, grid, rtol, atol = job.c, job.p, job.grid, job.rtol, job.atol
+    t_end = float(grid[-1])
     k = int(np.searchsorted(grid, t + 1e-13 * max(1.0, abs(t)), side="right")) - 1
     while True:
         seg_end = float(grid[segment_end(grid, k, reach, h)]) if c.m and k < len(grid) - 1 else t_end
@@ -74,8 +81,8 @@ def _segment(rhs, c, p, grid, t, y, t_end, method, rtol, atol, fns, lift_events,
         options = {"max_step": float(grid[1] - grid[0])} if lift_events and len(grid) > 1 else {}
         if h > 0.0:
             options["first_step"] = min(h, seg_end - t, options.get("max_step", h))
-        sol = solve_ivp(rhs, (t, seg_end), y, method=method, rtol=rtol, atol=atol, t_eval=t_eval, events=fns or None,
-                        **options)
+        sol = solve_ivp(job.rhs, (t, seg_end), y, method=job.method, rtol=rtol, atol=atol, t_eval=t_eval,
+                        events=fns or None, **options)
         if not sol.success:
             raise AnalysisError(f"integration failed at t = {sol.t_reached:.6g}: {sol.message}")
         if c.m:
@@ -90,8 +97,7 @@ def _segment(rhs, c, p, grid, t, y, t_end, method, rtol, atol, fns, lift_events,
         return sol
 
 
-def integrate_with_impacts(model, c, rhs, p, grid, y0, method, rtol, atol, event_fns, note_events,
-                            capture_velocity):
+def integrate_with_impacts(job: Integration, y0: np.ndarray, capture_velocity: float):
     """Segments between impacts: gap = 0 (closing) stops the integrator, the impulse law gives the velocities of
     separation, and integration restarts. Rest rule: an impact whose approach speed is below capture_velocity is
     plastic and its contact becomes persistent (a constraint row), so a bouncing ball ends in finitely many
@@ -102,6 +108,7 @@ def integrate_with_impacts(model, c, rhs, p, grid, y0, method, rtol, atol, event
     from mechsys.analysis.impact.collide import joint_impulses, resolve
     from mechsys.analysis.motion.simulate import PROJECTION_STEPS, check_on_manifold, project
 
+    model, c, rhs, p, grid = job.model, job.c, job.rhs, job.p, job.grid
     n = c.n
     impacts: list[dict] = []
     times, states = [0.0], [y0]
@@ -153,11 +160,11 @@ def integrate_with_impacts(model, c, rhs, p, grid, y0, method, rtol, atol, event
             gap_events.append((k, g))
         lift_events = _lift_off_functions(rhs, c, p)
         own = gap_events + open_events + lift_events
-        fns = [g for _, g in own] + list(event_fns)
+        fns = [g for _, g in own] + list(job.event_fns)
         # closed loops: a segment ends at an output point about PROJECTION_STEPS steps of the size reached away (as
         # simulate's closed-loop paths do), where the state is projected onto the constraints; shorter when its
         # outputs drift off the constraints
-        sol = _segment(rhs, c, p, grid, t, y, t_end, method, rtol, atol, fns, lift_events, h, reach)
+        sol = _segment(job, t, y, fns, lift_events, h, reach)
         reach, h, seg_end = sol.reach, sol.h_next or 0.0, sol.seg_end
         if len(sol.t):
             times += list(sol.t)
@@ -165,7 +172,7 @@ def integrate_with_impacts(model, c, rhs, p, grid, y0, method, rtol, atol, event
         user = type(sol)(sol)
         user.t_events = sol.t_events[len(own):] if sol.t_events else None
         user.y_events = sol.y_events[len(own):] if sol.y_events else None
-        if note_events(user) and sol.status == 1:
+        if job.note_events(user) and sol.status == 1:
             stopped = True
             break
         if sol.status != 1:

@@ -4,7 +4,7 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
 
@@ -51,6 +51,23 @@ class Compiled:
     Q: object = None  # generalized forces not derived from V (their power is the non-conservative work rate)
     Q_zero: bool = True  # Q vanishes identically
     rheonomic_rows: bool = False  # some constraint row depends on t explicitly (drives, moving surfaces)
+
+
+@dataclass
+class Integration:
+    """One simulate call's integration problem, as the scipy, CVODE and impact paths take it (one object instead
+    of ten positional arguments)."""
+
+    model: MechanicalModel
+    c: Compiled
+    rhs: RightHandSide
+    p: np.ndarray
+    grid: np.ndarray  # output times
+    method: str
+    rtol: float
+    atol: float
+    event_fns: list  # the file's events as scipy event functions
+    note_events: Callable[[Any], bool]  # records a solve's events; True when a stopping event fired
 
 
 def _contact_sources(model: MechanicalModel, args) -> dict:
@@ -664,13 +681,13 @@ def _start(model: MechanicalModel, c: Compiled, p: np.ndarray) -> tuple[np.ndarr
     return q0, u0, warnings
 
 
-def _closed_loop_scipy(rhs: RightHandSide, c: Compiled, p: np.ndarray, grid: np.ndarray, y0: np.ndarray,
-                       method: str, rtol: float, atol: float, event_fns: list, note_events) -> tuple:
+def _closed_loop_scipy(job: Integration, y0: np.ndarray) -> tuple:
     """Closed loops on scipy or CVODE: projected solves as in ``native_projected`` (each spans about
     PROJECTION_STEPS steps of the size reached, ends on an output point where the state is projected onto the
     constraints, starts with the step size reached; shortened when its dense outputs drift off the constraints).
     One solve per output interval restarted the method at every output. A stopping event ends the rows with the
     projected state at the event."""
+    rhs, c, p, grid, method, rtol, atol = job.rhs, job.c, job.p, job.grid, job.method, job.rtol, job.atol
     solve_ivp = ivp_solver(method)
     n = c.n
     ys, times, steps, y = [y0], [0.0], 0, y0
@@ -679,7 +696,7 @@ def _closed_loop_scipy(rhs: RightHandSide, c: Compiled, p: np.ndarray, grid: np.
         j = segment_end(grid, k, reach, h)
         first = {"first_step": min(h, float(grid[j] - grid[k]))} if h > 0.0 and method != "CVODE" else {}
         sol = solve_ivp(rhs, (float(grid[k]), float(grid[j])), y, method=method, rtol=rtol, atol=atol,
-                        t_eval=grid[k + 1:j + 1], events=event_fns or None, **first)
+                        t_eval=grid[k + 1:j + 1], events=job.event_fns or None, **first)
         if not sol.success:
             t_fail, y_fail = getattr(sol, "t_reached", None), getattr(sol, "y_reached", None)
             if t_fail is None:  # CVODE on a grid: its last output
@@ -707,16 +724,16 @@ def _closed_loop_scipy(rhs: RightHandSide, c: Compiled, p: np.ndarray, grid: np.
         y = np.concatenate([q, u])
         ys.append(y)
         times.append(t_stop)
-        if note_events(sol) and stopped:
+        if job.note_events(sol) and stopped:
             break
         k = j
     return np.array(times), np.array(ys), steps
 
 
-def _plain_scipy(rhs: RightHandSide, model: MechanicalModel, grid: np.ndarray, y0: np.ndarray, method: str,
-                 rtol: float, atol: float, event_fns: list, note_events) -> tuple:
+def _plain_scipy(job: Integration, y0: np.ndarray) -> tuple:
     """No constraints: one solve_ivp (or CVODE) call over the output grid; a stopping event ends the rows.
     scipy runs with dense output (the same per-step interpolants t_eval would use) so its steps can be counted."""
+    rhs, grid, method, rtol, atol, event_fns = job.rhs, job.grid, job.method, job.rtol, job.atol, job.event_fns
     if method == "CVODE":
         sol = ivp_solver(method)(rhs, (0.0, float(grid[-1])), y0, t_eval=grid, rtol=rtol, atol=atol,
                                  events=event_fns or None)
@@ -732,10 +749,10 @@ def _plain_scipy(rhs: RightHandSide, model: MechanicalModel, grid: np.ndarray, y
         Y = sol.sol(grid).T
     else:
         grid = sol.t
-    if note_events(sol) and sol.y_events is not None:
+    if job.note_events(sol) and sol.y_events is not None:
         # a stopping event: the last output row is the state at the event
         k, t_stop = min(((k, ts[-1]) for k, ts in enumerate(sol.t_events)
-                         if len(ts) and model.events[k][3] == "stop"), key=lambda kv: kv[1])
+                         if len(ts) and job.model.events[k][3] == "stop"), key=lambda kv: kv[1])
         Y = np.vstack([Y[grid < t_stop], sol.y_events[k][-1]])
         grid = np.append(grid[grid < t_stop], t_stop)
     return grid, Y, steps
@@ -816,17 +833,17 @@ def simulate(model: MechanicalModel, t_end: float, dt: float | None = None, meth
             raise AnalysisError(f"integration failed at t = {run.t_reached:.6g}: {run.message}")
         rhs.calls += run.nfev
         Y, steps = run.y, run.nsteps
+    job = Integration(model, c, rhs, p, grid, chosen, rtol, atol, event_fns, note_events)
     if Y is not None:
         grid = grid[:len(Y)]
     elif c.gap_names:
         from mechsys.analysis.impact.impacts import integrate_with_impacts
 
-        grid, Y, steps, impacts, _stopped = integrate_with_impacts(model, c, rhs, p, grid, y0, chosen, rtol, atol,
-                                                                    event_fns, note_events, capture_velocity)
+        grid, Y, steps, impacts, _stopped = integrate_with_impacts(job, y0, capture_velocity)
     elif c.m:
-        grid, Y, steps = _closed_loop_scipy(rhs, c, p, grid, y0, chosen, rtol, atol, event_fns, note_events)
+        grid, Y, steps = _closed_loop_scipy(job, y0)
     else:
-        grid, Y, steps = _plain_scipy(rhs, model, grid, y0, chosen, rtol, atol, event_fns, note_events)
+        grid, Y, steps = _plain_scipy(job, y0)
     timings["integrate"] = time.perf_counter() - t1
     q, u = Y[:, :n], Y[:, n:]
     T = np.array([c.T(t, qi, ui, p)[0, 0] for t, qi, ui in zip(grid, q, u)])
