@@ -24,7 +24,7 @@ demo: $(STAMP)
 ## test: install, run the textbook checks of every bundled model, then the whole suite (slow tests included)
 test: $(STAMP)
 	$(BIN)/mechsys check systems/ -f markdown
-	$(BIN)/python -m pytest -n 2 -q
+	$(BIN)/python -m pytest -n 2 -q --durations=25
 
 ## test-fast: skip the tests marked slow
 test-fast: $(STAMP)
@@ -38,6 +38,7 @@ check: $(STAMP)
 bench: $(STAMP)
 	$(BIN)/python -m pip install --quiet -e ".[dev,bench]"
 	$(BIN)/python benchmarks/derive_chain.py
+	$(BIN)/python benchmarks/derive_chain.py --commands --timeout 60
 	$(BIN)/python benchmarks/derive_bicycle.py
 	$(BIN)/python benchmarks/backends.py
 	$(BIN)/python benchmarks/simulate_anchor.py

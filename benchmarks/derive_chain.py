@@ -22,6 +22,12 @@ Wall times are reported, never asserted.
     python benchmarks/derive_chain.py --quick           # n = 5 10
     python benchmarks/derive_chain.py --n 20 --repeat 3 --method lagrange --baseline absolute
     python benchmarks/derive_chain.py --profile 20      # cProfile of the mechsys pipeline at n = 20
+    python benchmarks/derive_chain.py --commands        # the CLI commands users run, n = 5 10 20 40 80
+
+With --commands the script times what users run instead: whole `mechsys` processes (imports included) on the
+chain's YAML file, `derive -f json` with the default method (Lagrange) and with `--method kane`, `info` and
+`equilibria`, each cold (a fresh private cache folder) and then cached (the same command again), against the
+issue's goals (20-link `derive` under 1 s with every method, n = 80 under 20 s) and the absolute-angle baseline.
 """
 from __future__ import annotations
 
@@ -272,6 +278,72 @@ def rel_diff(a: list[float], b: list[float]) -> float:
     return float(np.max(np.abs(a_ - b_))) / scale
 
 
+COMMANDS = {  # label -> mechsys arguments after the file
+    "derive (lagrange)": ["derive", "-f", "json", "-o", "{out}"],
+    "derive --method kane": ["derive", "--method", "kane", "-f", "json", "-o", "{out}"],
+    "info": ["info"],
+    "equilibria": ["equilibria"],
+}
+GOAL_DERIVE_N20, GOAL_DERIVE_N80 = 1.0, 20.0  # seconds, whole process (issue 13)
+
+
+def time_command(args: list[str], cache: Path, timeout: float) -> tuple[float | None, int | None]:
+    """Wall time of one whole `mechsys` process (None past the timeout) and its exit code."""
+    env = dict(os.environ, MECHSYS_CACHE=str(cache), COLUMNS="120")
+    t0 = time.perf_counter()
+    try:
+        proc = subprocess.run([sys.executable, "-m", "mechsys", *args], env=env, capture_output=True, text=True,
+                              timeout=timeout)
+    except subprocess.TimeoutExpired:
+        return None, None
+    return time.perf_counter() - t0, proc.returncode
+
+
+def main_commands(ns: list[int], timeout: float, baseline: bool) -> int:
+    """The --commands table: every command cold and cached per n, the baseline's derivation beside them."""
+    print(f"derive_chain --commands: whole `mechsys` processes on the n-link chain (imports included), cold "
+          f"(empty cache) then cached; timeout {timeout:g} s; {os.cpu_count()} CPUs")
+    labels = list(COMMANDS)
+    cols = [f"{'n':>3}"] + [f"{lab:>22}" for lab in labels] + ([f"{'sympy abs':>10}"] if baseline else [])
+    print(" | ".join(cols))
+    print("    " + " | ".join(f"{'cold / cached':>22}" for _ in labels))
+    failed = False
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for n in ns:
+            model = Path(tmp) / f"chain{n}.yaml"
+            model.write_text(chain_yaml(n), encoding="utf-8")
+            cells, row = [], {"n": n}
+            for label in labels:
+                cache = Path(tmp) / f"cache{n}-{labels.index(label)}"
+                args = [a.format(out=Path(tmp) / "out.json") for a in [COMMANDS[label][0], str(model),
+                                                                       *COMMANDS[label][1:]]]
+                cold, rc = time_command(args, cache, timeout)
+                warm, rc2 = time_command(args, cache, timeout) if cold is not None else (None, None)
+                failed |= bool(rc) or bool(rc2)
+                row[label] = (cold, warm)
+                cells.append(f"{fmt_t(cold, timeout):>10} / {fmt_t(warm, timeout):>9}")
+            if baseline:
+                base = run_worker("baseline-abs", n, "kane", str(model), timeout)
+                row["sympy abs"] = base["total"] if base else None
+                cells.append(f"{fmt_t(row['sympy abs'], timeout):>10}")
+            rows.append(row)
+            print(" | ".join([f"{n:>3}"] + cells), flush=True)
+    print()
+    for n, goal in ((20, GOAL_DERIVE_N20), (80, GOAL_DERIVE_N80)):
+        row = next((r for r in rows if r["n"] == n), None)
+        if row is None:
+            continue
+        for label in ("derive (lagrange)", "derive --method kane"):
+            cold = row[label][0]
+            verdict = "met" if cold is not None and cold < goal else "NOT met"
+            print(f"goal: `mechsys {label}` of the {n}-link chain under {goal:g} s (cold): {verdict} "
+                  f"({fmt_t(cold, timeout)})")
+    if failed:
+        print("a command exited with an error", file=sys.stderr)
+    return 1 if failed else 0
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -288,6 +360,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--profile", type=int, metavar="N", help="only cProfile the mechsys pipeline at n = N")
     ap.add_argument("--top", type=int, default=25, help="rows printed by --profile")
     ap.add_argument("--json", metavar="FILE", help="also write the raw results as JSON")
+    ap.add_argument("--commands", action="store_true",
+                    help="time the CLI commands users run (derive each method, info, equilibria), cold and cached; "
+                         "default n = 5 10 20 40 80")
     ap.add_argument("--worker", choices=["mechsys", *BASELINES.values()], help=argparse.SUPPRESS)
     ap.add_argument("--yaml", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
@@ -303,6 +378,9 @@ def main(argv: list[str] | None = None) -> int:
     if args.profile:
         profile_mechsys(args.profile, args.method, args.top)
         return 0
+    if args.commands:
+        ns = args.n if "--n" in (argv if argv is not None else sys.argv) else [5, 10, 20, 40, 80]
+        return main_commands(ns, args.timeout, args.baseline != "relative")
 
     ns = [5, 10] if args.quick else args.n
     kinds = list(BASELINES) if args.baseline == "both" else [args.baseline]
