@@ -1,4 +1,5 @@
 """`info`: DOF of every bundled system, mobility counting (Krodkiewski eq. 1.8, Fig. 8), system classes."""
+from dataclasses import asdict as asdict_info
 from pathlib import Path
 
 import pytest
@@ -108,3 +109,22 @@ def test_the_symbolic_proof_of_a_cyclic_coordinate_has_a_size_budget(monkeypatch
     tried.clear()
     assert not symmetry._proven_constant(small + [big], q) and tried == []
     assert symmetry._size(big, 100) == 101
+
+
+@pytest.mark.parametrize("name", ["four_bar", "centrifuge", "rolling_disk"])
+def test_a_second_info_reads_its_matrices_from_the_cache_and_says_the_same(name, tmp_path, monkeypatch):
+    """Issue 13: `info` compiled M and A (sympy CSE) on every run; their generated code is now cached like the
+    simulation's. A cached run generates no code and gives what an uncached one gives."""
+    import mechsys.analysis.info as info
+
+    monkeypatch.setenv("MECHSYS_CACHE", "off")
+    uncached = asdict_info(system_info(mechsys.load(ROOT / "systems" / f"{name}.yaml")))
+    monkeypatch.setenv("MECHSYS_CACHE", str(tmp_path / "cache"))
+    first = asdict_info(system_info(mechsys.load(ROOT / "systems" / f"{name}.yaml")))
+
+    def no_code(*args, **kwargs):
+        raise AssertionError("a cached info generated code")
+
+    monkeypatch.setattr(info, "matrix_source", no_code)
+    second = asdict_info(system_info(mechsys.load(ROOT / "systems" / f"{name}.yaml")))
+    assert first == second == uncached

@@ -8,7 +8,9 @@ import numpy as np
 from mechsys.analysis.crosscheck import random_states
 from mechsys.errors import AnalysisError
 from mechsys.mechanics.model import INTERNAL_METHOD, MechanicalModel
-from mechsys.numeric.lambdify import compile_matrix
+from mechsys.numeric import cache
+from mechsys.numeric.lambdify import matrix_source
+from mechsys.numeric.runtime import matrix_from_source
 
 
 @dataclass
@@ -65,6 +67,24 @@ def _rank(matrix: np.ndarray) -> int:
     return int(np.sum(s > 1e-9 * max(1.0, s[0])))
 
 
+def _matrices(model: MechanicalModel):
+    """The constraint Jacobian A and the mass matrix M as numeric functions of (t, q, u, p), their generated code
+    cached on disk like the simulation's (keyed by the model's structure, parameters kept as symbols), so a second
+    `info` on a model runs no CSE."""
+    key = cache.model_key(model, "info")
+    desc = cache.load(key)
+    try:
+        if desc is not None:
+            return matrix_from_source(desc["A"]), matrix_from_source(desc["M"])
+    except (KeyError, TypeError, ValueError, SyntaxError):
+        pass  # another format: derive again
+    args = (model.t, model.q, model.u, model.parameter_symbols)
+    desc = {"A": matrix_source(model.constraint_jacobian, *args),
+            "M": matrix_source(model.equations(INTERNAL_METHOD).M, *args)}
+    cache.store(key, desc)
+    return matrix_from_source(desc["A"]), matrix_from_source(desc["M"])
+
+
 def system_info(model: MechanicalModel) -> Info:
     kin = model.kin
     joints = [JointRow(j.link, j.parent, j.type, j.coordinates, j.joint_class, j.reactions) for j in kin.joints]
@@ -75,14 +95,12 @@ def system_info(model: MechanicalModel) -> Info:
     params = model.parameter_symbols
     p = [model.parameters[s.name] for s in params]
     states = random_states(model, 3, seed=7)
-    A_fn = compile_matrix(model.constraint_jacobian, model.t, model.q, model.u, params)
+    A_fn, M_fn = _matrices(model)
     hol = [i for i, c in enumerate(kin.constraints) if c.kind == "holonomic"]
     rank = max(_rank(A_fn(t, q, u, p)) for t, q, u in states)
     hol_rank = max(_rank(A_fn(t, q, u, p)[hol, :]) for t, q, u in states) if hol else 0
     nfree = len(model.q)
     dof = nfree - rank
-    eq = model.equations(INTERNAL_METHOD)
-    M_fn = compile_matrix(eq.M, model.t, model.q, model.u, params)
     massless = []
     notes = []
     if nfree:
