@@ -398,7 +398,7 @@ def equilibria(
             from mechsys.analysis.equilibrium.bifurcation import plot_sweep, sweep
 
             (name, (start, stop, n)), = sweep_spec.items()
-            swept = sweep(model, name, start, stop, int(n), boxes, options)
+            swept = sweep(model, name, start, stop, int(n), boxes, options, result.problem)
             bifurcations = swept.bifurcations
             tables += rep.sweep_tables(swept)
             if plot is not None:

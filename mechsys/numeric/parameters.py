@@ -16,10 +16,17 @@ def parameter_values(model: MechanicalModel, changes: dict[str, float] | None = 
     doc = model.doc
     if not changes:
         return np.array([doc.parameter_values[n] for n in doc.parameters], dtype=float)
+    followers = _followers(doc, frozenset(changes))
+    if not followers:  # nothing is defined from them (a continuation's usual case: thousands of calls)
+        out = np.array([doc.parameter_values[n] for n in doc.parameters], dtype=float)
+        index = {sym: k for k, sym in enumerate(model.parameter_symbols)}
+        for name, value in changes.items():
+            out[index[doc.parameters[name]]] = float(value)
+        return out
     values = {sym: doc.parameter_values[name] for name, sym in doc.parameters.items()}
     for name in changes:
         values[doc.parameters[name]] = float(changes[name])
-    for name, expr in _followers(doc, frozenset(changes)):  # in dependency order
+    for name, expr in followers:  # in dependency order
         # sympy Floats, not Python floats: for an alias ``m1: m2`` the xreplace returns the value itself
         known = {s: sp.Float(values[s]) for s in expr.free_symbols if s in values}
         values[doc.parameters[name]] = float(sp.sympify(expr.xreplace(known)).evalf())

@@ -15,6 +15,7 @@ from mechsys.analysis.equilibrium.stability import ZERO_RE, assess, eigen, reduc
 from mechsys.errors import AnalysisError, InputError
 from mechsys.mechanics.model import MechanicalModel
 from mechsys.numeric.lambdify import compile_exprs
+from mechsys.numeric.parallel import fork_map
 from mechsys.numeric.parameters import parameter_values
 
 
@@ -176,13 +177,14 @@ def _rate_parameter(problem: EquilibriumProblem, coord: str) -> SweptParameter:
 
 
 def sweep(model: MechanicalModel, name: str, start: float, stop: float, points: int = 101,
-          search: dict | None = None, options=None) -> SweepResult:
+          search: dict | None = None, options=None, problem: EquilibriumProblem | None = None) -> SweepResult:
     """Follow every equilibrium branch found at the ends and the middle of [start, stop] by pseudo-arclength
     continuation; stability from the eigenvalues; folds, branch points, Hopf points and eigenvalue collisions on
-    the imaginary axis located on the way. NAME is a parameter or der(NAME) of a family of steady motions."""
+    the imaginary axis located on the way. NAME is a parameter or der(NAME) of a family of steady motions.
+    ``problem``: make_problem(model, options) already used (an EquilibriaResult's), whose searches are reused."""
     if start == stop:
         raise InputError(f"--sweep {name}: START and STOP must differ")
-    problem = make_problem(model, options)
+    problem = make_problem(model, options) if problem is None else problem
     par = swept_parameter(problem, name)
     name = par.name  # der(NAME) spelled without spaces
     lo, hi = min(start, stop), max(start, stop)
@@ -216,12 +218,19 @@ def sweep(model: MechanicalModel, name: str, start: float, stop: float, points: 
     starts = []
     undefined = []
     singular: dict[str, list[np.ndarray]] = {}
-    for p in np.linspace(lo, hi, 5):  # branches born inside the range need a start of their own
+    samples = np.linspace(lo, hi, 5)  # branches born inside the range need a start of their own
+
+    def multistart(k: int) -> list[np.ndarray] | str:
         try:
-            starts += [(z, float(p)) for z in drop_singular(problem, solve_equilibria(problem, par.at(p), search),
-                                                            par.at(p), singular)]
+            return solve_equilibria(problem, par.at(samples[k]), search)
         except (ValueError, ArithmeticError) as exc:  # e.g. sqrt of a negative parameter: math domain error
-            undefined.append(f"{name} = {p:g} ({exc})")
+            return str(exc)
+
+    for p, found in zip(samples, fork_map(multistart, len(samples))):  # independent: one worker each
+        if isinstance(found, str):
+            undefined.append(f"{name} = {p:g} ({found})")
+        else:
+            starts += [(z, float(p)) for z in drop_singular(problem, found, par.at(p), singular)]
     span = hi - lo if hi > lo else 1.0
     step = span / max(points - 1, 1)
     if starts:
@@ -246,7 +255,10 @@ def sweep(model: MechanicalModel, name: str, start: float, stop: float, points: 
     # the step limit grows with the points asked for (a branch needs at least points - 1 steps to cross the range)
     skipped: list[tuple[float, str]] = []
     try:
-        branches = sweep_parameter(F, Fx, Fp, starts, lo, hi, eig, skipped=skipped, ds=step / 2,
+        # the point verdicts below read the linearizations the continuation's eigenvalues computed (in workers)
+        share = ((problem.take_linearizations, problem.give_linearizations)
+                 if hasattr(problem, "take_linearizations") else None)
+        branches = sweep_parameter(F, Fx, Fp, starts, lo, hi, eig, skipped=skipped, share=share, ds=step / 2,
                                    ds_max=min(step, 0.2 * max(span, 1.0)), tol_re=ZERO_RE * 10,
                                    max_steps=max(2000, 20 * points), x_scale=arc,
                                    tol_scale=None if arc is None else np.ones(len(arc))) if starts else []
@@ -308,7 +320,10 @@ def sweep(model: MechanicalModel, name: str, start: float, stop: float, points: 
             events.append({"kind": bif.kind, "parameter": name, "value": float(bif.p), "coordinates": coords,
                            "refined": refined})
     result.bifurcations = _merge_events(events, angles, step)
-    result.bifurcations.sort(key=lambda b: (b["value"], b["kind"]))
+    # events at the same value to 9 digits (mirror images: a bicycle leaning left and right) are ordered by kind
+    # and coordinates, not by the round-off in their values
+    result.bifurcations.sort(key=lambda b: (float(f"{b['value']:.9g}"), b["kind"],
+                                            tuple(round(v, 6) for v in b["coordinates"].values()), b["value"]))
     return result
 
 

@@ -7,6 +7,8 @@ from typing import Any, Callable, Sequence
 import numpy as np
 from scipy.optimize import brentq, linear_sum_assignment
 
+from mechsys.numeric.parallel import Workers
+
 ArrayFn = Callable[[np.ndarray, float], np.ndarray]
 
 _MAX_CORRECTOR_ITER = 10     # Newton iterations per corrector before the step is halved
@@ -107,11 +109,17 @@ class _Tracer:
         return np.asarray(self.F(x, p), dtype=float).reshape(self.n)
 
     def jac(self, z: np.ndarray) -> np.ndarray:
-        """[Fx * x_scale | Fp], n x (n+1)."""
+        """[Fx * x_scale | Fp], n x (n+1); the last point's is kept (a node's tangent and det read the same)."""
+        key = z.tobytes()
+        last = self.__dict__.get("_last_jac")
+        if last is not None and last[0] == key:
+            return last[1].copy()
         x, p = self.xp(z)
         A = np.asarray(self.Fx(x, p), dtype=float).reshape(self.n, self.n) * self.s[None, :]
         b = np.asarray(self.Fp(x, p), dtype=float).reshape(self.n)
-        return np.column_stack([A, b])
+        out = np.column_stack([A, b])
+        self.__dict__["_last_jac"] = (key, out.copy())
+        return out
 
     def det(self, z: np.ndarray) -> float:
         return float(np.linalg.det(self.jac(z)[:, :self.n]))
@@ -617,13 +625,15 @@ def _on_branch(cont: _Continuation, branch: Branch, z: np.ndarray) -> bool:
 
 def sweep_parameter(F: ArrayFn, Fx: ArrayFn, Fp: ArrayFn, starts: list[tuple[np.ndarray, float]], p_min: float,
                     p_max: float, eig: ArrayFn, skipped: list[tuple[float, str]] | None = None,
-                    **kw: Any) -> list[Branch]:
+                    share: tuple[Callable[[], Any], Callable[[Any], None]] | None = None, **kw: Any) -> list[Branch]:
     """Trace each start both ways (direction -1 and +1) and merge the two halves into one branch along the arc.
 
     The merged points run from the end of the direction -1 half, through the start, to the end of the +1 half;
     bifurcation indices refer to the merged list. A start that lies on an already-traced branch is skipped; a
     closed branch is traced once. ``kw`` are the keyword options of ``continue_branch`` (``direction`` ignored).
-    A start where ``eig`` raises Undefined is not traced; its (p, reason) is appended to ``skipped``.
+    A start where ``eig`` raises Undefined is not traced; its (p, reason) is appended to ``skipped``. The starts
+    are traced in forked workers where more than one process is available (numeric/parallel.py: the branches are
+    those of the serial loop); ``share`` carries state of ``eig`` back from them (e.g. a memo).
     """
     kw = dict(kw)
     kw.pop("direction", None)
@@ -635,23 +645,52 @@ def sweep_parameter(F: ArrayFn, Fx: ArrayFn, Fp: ArrayFn, starts: list[tuple[np.
     defaults = dict(ds=0.05, ds_min=1e-6, ds_max=0.5, max_steps=2000, tol=1e-10, tol_re=1e-9, x_scale=None,
                     tol_scale=None)
     defaults.update(opts)
-    out: list[tuple[_Continuation, Branch]] = []
-    for x0, p0 in starts:
-        cont, z0 = _setup(F, Fx, Fp, x0, p0, p_min, p_max, eig, **defaults)
-        if any(_on_branch(cont, br, z0) for _, br in out):
-            continue
+    setups = [_setup(F, Fx, Fp, x0, p0, p_min, p_max, eig, **defaults) for x0, p0 in starts]
+
+    def half(j: int) -> tuple[Branch, bool] | str:
+        """Start j // 2 traced forward (j even) or backward: (half branch, closed), or the reason eig is
+        undefined at the start."""
+        cont, z0 = setups[j // 2]
         try:
-            fwd, closed = cont.run(z0, +1.0)
-            if closed:
-                out.append((cont, fwd))
+            return cont.run(z0, -1.0 if j % 2 else +1.0)
+        except Undefined as exc:
+            return str(exc)
+
+    out: list[Branch] = []
+
+    def new(k: int, since: int = 0) -> bool:
+        return not any(_on_branch(setups[k][0], br, setups[k][1]) for br in out[since:])
+
+    with Workers(half, 2 * len(starts), share) as workers:
+        # a start on a branch already traced is skipped. Workers trace the halves of the next starts ahead; a
+        # start found on a branch that finished meanwhile is then dropped (and a backward half when the forward
+        # one closed), so the branches are those of the serial loop
+        handles: dict[int, tuple[Any, Any, int]] = {}  # start -> (forward, backward, branches checked against)
+        ahead = 0
+        for k in range(len(setups)):
+            while ahead < len(setups) and len(handles) < workers.processes:
+                if new(ahead):
+                    handles[ahead] = (workers.submit(2 * ahead), workers.submit(2 * ahead + 1), len(out))
+                ahead += 1
+            if k not in handles:
                 continue
-            bwd, _ = cont.run(z0, -1.0)
-        except Undefined as exc:  # at the start itself
-            if skipped is not None:
-                skipped.append((float(p0), str(exc)))
-            continue
-        out.append((cont, _merge(bwd, fwd)))
-    return [br for _, br in out]
+            fwd_handle, bwd_handle, checked = handles.pop(k)
+            if not new(k, checked):
+                workers.discard(fwd_handle, bwd_handle)
+                continue
+            fwd = workers.result(fwd_handle)
+            bwd = None
+            if isinstance(fwd, str) or fwd[1]:  # undefined at the start, or closed: no backward half
+                workers.discard(bwd_handle)
+            else:
+                bwd = workers.result(bwd_handle)
+            undefined = fwd if isinstance(fwd, str) else bwd if isinstance(bwd, str) else None
+            if undefined is not None:  # at the start itself
+                if skipped is not None:
+                    skipped.append((float(starts[k][1]), undefined))
+                continue
+            out.append(fwd[0] if bwd is None else _merge(bwd[0], fwd[0]))
+    return out
 
 
 def _merge(bwd: Branch, fwd: Branch) -> Branch:

@@ -4,7 +4,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from functools import cached_property
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import sympy as sp
@@ -61,6 +61,7 @@ class EquilibriaResult:
     search: SearchReport | None = None
     exhaustive: Exhaustive | None = None  # what the exhaustive mode computed (analysis/equilibrium/exhaustive.py)
     formulation: str = ""  # nonholonomic: independent speeds, eliminated and ignorable coordinates
+    problem: Any = field(default=None, repr=False, compare=False)  # the equations solved (a sweep may reuse them)
 
     def _repr_markdown_(self) -> str:
         """Jupyter: the tables of `mechsys equilibria -f markdown`."""
@@ -469,6 +470,24 @@ def solve_equilibria(problem: EquilibriumProblem, p: np.ndarray, search: dict | 
                      seed: int = 0, report: SearchReport | None = None) -> list[np.ndarray]:
     """All roots found from multistart deflated Newton inside the search box (multipliers start from lstsq)."""
     plan = search_plan(problem, search, starts) if report is None else report
+    # remembered per problem: a sweep through the file's parameter values repeats the search equilibria made
+    # there. The key is everything the search reads besides the problem's equations
+    key = (np.asarray(p, dtype=float).tobytes(), tuple(sorted(problem.fixed_rates.items())),
+           tuple(sorted(getattr(problem, "given", {}).items())), repr(sorted((search or {}).items())), plan.starts,
+           repr(plan.region), seed)
+    memo = problem.__dict__.setdefault("_searches", {})
+    if key in memo:
+        roots, outside = memo[key]
+        plan.outside += outside
+        return [z.copy() for z in roots]
+    before = len(plan.outside)
+    roots = _search(problem, p, plan, seed)
+    memo[key] = ([z.copy() for z in roots], plan.outside[before:])
+    return roots
+
+
+def _search(problem: EquilibriumProblem, p: np.ndarray, plan: SearchReport, seed: int) -> list[np.ndarray]:
+    """solve_equilibria's multistart (plan.outside collects the roots beyond the default start boxes)."""
     boxes = list(plan.region.values())
     names = list(plan.region)
     given = [n in plan.restricted for n in names]
@@ -646,7 +665,7 @@ def find_equilibria(model: MechanicalModel, search: dict[str, tuple[float, float
                    else "no equilibrium: the equations have no real root (exhaustive search)")
     split = getattr(problem, "split", None)
     return EquilibriaResult(equilibria, message, problem.cyclic, dict(problem.fixed_rates), plan, exact,
-                            split.text() if split is not None else "")
+                            split.text() if split is not None else "", problem)
 
 
 def _equilibrated(J: np.ndarray) -> np.ndarray:

@@ -129,6 +129,7 @@ class ConstrainedPieces:
         v["E"] = v["E"].ravel()
         jac = out[self._outputs:self._outputs + self.size * 2 * self.n].reshape(self.size, 2 * self.n)
         v["Eq"], v["Eu"] = jac[:, :self.n], jac[:, self.n:]
+        v["raw"] = np.append(out, 0.0)  # every number above, and a zero last (NonholonomicProblem._gather)
         for block in v.values():
             block.flags.writeable = False  # shared by the callers of the same point
         self._last = (tag, v)
@@ -414,17 +415,28 @@ class NonholonomicProblem(EquilibriumProblem):
         qua[where] = z[k]
         return qua[:n], qua[n:2 * n], qua[2 * n:], z[len(k):len(k) + self.m]
 
+    @cached_property
+    def _gather(self) -> tuple[np.ndarray, np.ndarray]:
+        """dE/dz as (index, sign) into a point's raw output: d/dq and d/du from the Jacobian block, d/da from M
+        (rows of R) and A (rows of S), d/dlambda = -A^T (rows of R); the index of the trailing zero elsewhere."""
+        n, m, pieces = self.n, self.m, self.pieces
+        size = pieces.size
+        index = np.full((size, 3 * n + m), pieces._full_size)
+        sign = np.ones((size, 3 * n + m))
+        rows, cols = np.arange(size)[:, None], np.arange(2 * n)[None, :]
+        index[:, :2 * n] = pieces._outputs + rows * 2 * n + cols
+        M0, A0 = pieces.layout["M"][0], pieces.layout["A"][0]
+        index[:n, 2 * n:3 * n] = M0 + np.arange(n)[:, None] * n + np.arange(n)[None, :]
+        index[n:n + m, 2 * n:3 * n] = A0 + np.arange(m)[:, None] * n + np.arange(n)[None, :]
+        index[:n, 3 * n:] = A0 + np.arange(m)[None, :] * n + np.arange(n)[:, None]
+        sign[:n, 3 * n:] = -1.0
+        keep = np.concatenate([self._layout[0], 3 * n + np.arange(m)])
+        return index[:, keep], sign[:, keep]
+
     def _columns(self, v: dict) -> np.ndarray:
-        """dE/dz from dE/dq, dE/du and the blocks of a and lambda."""
-        n, m = self.n, self.m
-        size = self.pieces.size
-        full = np.zeros((size, 3 * n + m))  # d/dq, d/du, d/da, d/dlambda of E
-        full[:, :2 * n] = np.hstack([v["Eq"], v["Eu"]])
-        full[:n, 2 * n:3 * n] = v["M"]
-        full[n:n + m, 2 * n:3 * n] = v["A"]
-        full[:n, 3 * n:] = -v["A"].T
-        where = self._layout[0]
-        return full[:, np.concatenate([where, 3 * n + np.arange(m)])]
+        """dE/dz from dE/dq, dE/du and the blocks of a and lambda (one gather from the point's raw output)."""
+        index, sign = self._gather
+        return v["raw"][index] * sign
 
     def _at(self, z: np.ndarray, p: np.ndarray) -> dict:
         return self.pieces.evaluate(*self.full_state(z), p)
@@ -551,6 +563,17 @@ class NonholonomicProblem(EquilibriumProblem):
             memo[key] = linearize_steady(self, e, p)
         return memo[key]
 
+    def take_linearizations(self) -> dict:
+        """The linearizations remembered here, handed over and forgotten (a forked worker's, for its parent)."""
+        memo = self.__dict__.get("_linearizations") or {}
+        self.__dict__["_linearizations"] = {}
+        return memo
+
+    def give_linearizations(self, memo: dict | None) -> None:
+        """Remember linearizations a worker computed (same keys: every number they read)."""
+        if memo:
+            self.__dict__.setdefault("_linearizations", {}).update(memo)
+
     def pencil(self, e: Equilibrium) -> tuple[np.ndarray, np.ndarray, None]:
         """(A, I): the reduced Jacobian with the structural zero directions removed (continuation's eigenvalues)."""
         lin = self.linearization(e, getattr(self, "current_parameters", None))
@@ -676,6 +699,36 @@ class SteadyLinearization:
         return (self.M[np.ix_(nu, nu)], self.C[np.ix_(nu, nu)], self.K[np.ix_(nu, xi)])
 
 
+@dataclass(frozen=True)
+class _Indices:
+    """Positions linearize_steady reads, per split: independent and dependent speeds, kept and eliminated
+    coordinates, the shape coordinates' rows and their columns among the kept, the ignorable ones' columns."""
+
+    independent: list[int]
+    dependent: list[int]
+    keep: list[int]
+    eliminated: list[int]
+    rows_q: list[int]
+    cols_all: list[int]
+    cols_ign: list[int]
+
+
+def _indices(names: list[str], split: Split) -> _Indices:
+    key = (tuple(names), repr(split))
+    memo = _INDICES
+    if key not in memo:
+        keep = [i for i in range(len(names)) if names[i] not in split.eliminated]
+        rows_q = [names.index(c) for c in split.shape if c not in split.eliminated]
+        memo[key] = _Indices([names.index(c) for c in split.independent],
+                             [names.index(c) for c in split.dependent], keep,
+                             [names.index(c) for c in split.eliminated], rows_q, [keep.index(i) for i in rows_q],
+                             [keep.index(names.index(c)) for c in split.ignorable])
+    return memo[key]
+
+
+_INDICES: dict[tuple, _Indices] = {}
+
+
 def linearize_steady(problem: NonholonomicProblem, e: Equilibrium, p: np.ndarray | None = None) -> SteadyLinearization:
     """The linearization about a steady motion on the constraint manifold (module docstring)."""
     p = parameter_values(problem.model) if p is None else p
@@ -685,34 +738,31 @@ def linearize_steady(problem: NonholonomicProblem, e: Equilibrium, p: np.ndarray
     q, u, a, lam = problem.point(e)
     v = pieces.evaluate(q, u, a, lam, p)
     Eq, Eu, M, A = v["Eq"], v["Eu"], v["M"], v["A"]
-    I = [names.index(c) for c in split.independent]
-    D = [names.index(c) for c in split.dependent]
-    # accelerations from the differentiated saddle-point system
-    K = np.block([[M, -A.T], [A, np.zeros((m, m))]])
+    ix = _indices(names, split)
+    I, D, keep = ix.independent, ix.dependent, ix.keep
+    # accelerations from the differentiated saddle-point system (one factorization for d/dq and d/du)
+    K = np.zeros((n + m, n + m))
+    K[:n, :n], K[:n, n:], K[n:, :n] = M, -A.T, A
     try:
-        Pq = -np.linalg.solve(K, Eq[:n + m])[:n]
-        Pu = -np.linalg.solve(K, Eu[:n + m])[:n]
-        AD = A[:, D]
+        P = -np.linalg.solve(K, np.hstack([Eq[:n + m], Eu[:n + m]]))[:n]
+        Pq, Pu = P[:, :n], P[:, n:]
         Uq = np.zeros((n, n))
         UI = np.zeros((n, len(I)))
         UI[I, range(len(I))] = 1.0
         if m:
-            Uq[D] = -np.linalg.solve(AD, Eq[n + m:n + 2 * m])
-            UI[D] = -np.linalg.solve(AD, A[:, I])
-        keep = [i for i in range(n) if names[i] not in split.eliminated]
+            AD = A[:, D]
+            W = -np.linalg.solve(AD, np.hstack([Eq[n + m:n + 2 * m], A[:, I]]))
+            Uq[D], UI[D] = W[:, :n], W[:, n:]
         Qm = np.zeros((n, len(keep)))
         Qm[keep, range(len(keep))] = 1.0
         if mh:
-            E = [names.index(c) for c in split.eliminated]
             Phi_q = Eq[n + 2 * m:]
-            Qm[E] = -np.linalg.solve(Phi_q[:, E], Phi_q[:, keep])
+            Qm[ix.eliminated] = -np.linalg.solve(Phi_q[:, ix.eliminated], Phi_q[:, keep])
     except np.linalg.LinAlgError:
         raise AnalysisError("the constraints or the saddle-point system are singular at this steady motion: "
                             "choose other independent speeds with --independent") from None
     dq_dxi = Uq @ Qm  # rates per independent coordinate
-    rows_q = [names.index(c) for c in split.shape if c not in split.eliminated]
-    cols_all = [keep.index(i) for i in rows_q]
-    cols_ign = [keep.index(names.index(c)) for c in split.ignorable]
+    rows_q, cols_all, cols_ign = ix.rows_q, ix.cols_all, ix.cols_ign
     top = np.hstack([dq_dxi[rows_q][:, cols_all], UI[rows_q]])
     acc_q = (Pq @ Qm + Pu @ dq_dxi)[I]
     bottom = np.hstack([acc_q[:, cols_all], (Pu @ UI)[I]])

@@ -1,0 +1,207 @@
+"""Forked workers (numeric/parallel.py) give the serial loop's results, bit for bit: a sweep's multistart per sample
+value and its continuation branches; plus the memo of the search that a sweep through the file's values reuses."""
+from __future__ import annotations
+
+import os
+
+import numpy as np
+import pytest
+
+import mechsys
+from mechsys.analysis.equilibrium import continuation as co
+from mechsys.analysis.equilibrium import equilibria as eq
+from mechsys.analysis.equilibrium.bifurcation import sweep
+from mechsys.errors import InputError
+from mechsys.numeric import parallel
+from mechsys.numeric.parameters import parameter_values
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+def _branches_equal(a: list[co.Branch], b: list[co.Branch]) -> None:
+    assert len(a) == len(b)
+    for x, y in zip(a, b):
+        assert [p.p for p in x.points] == [p.p for p in y.points]
+        assert all(np.array_equal(p.x, q.x) and np.array_equal(p.eigenvalues, q.eigenvalues)
+                   and p.stable == q.stable and p.verdict == q.verdict for p, q in zip(x.points, y.points))
+        assert [(c.kind, c.p, c.index) for c in x.bifurcations] == [(c.kind, c.p, c.index) for c in y.bifurcations]
+        assert (x.truncated, x.stalled, x.undefined) == (y.truncated, y.stalled, y.undefined)
+
+
+@pytest.fixture
+def forked(monkeypatch):
+    """Run with 2 forked workers (even on one core) and count the pools that really forked."""
+    pools = []
+    original = parallel.Workers.__init__
+
+    def spy(self, *args, **kwargs):
+        original(self, *args, **kwargs)
+        pools.append(self.processes)
+
+    monkeypatch.setattr(parallel.Workers, "__init__", spy)
+
+    def use(workers: int) -> list[int]:
+        monkeypatch.setenv(parallel.ENV, str(workers))
+        pools.clear()
+        return pools
+
+    return use
+
+
+def pitchfork_with_an_undefined_start():
+    """p x - x^3 = 0, whose eigenvalue is undefined (Undefined) where x > 1.2: one start there is skipped."""
+    F = lambda x, p: np.array([p * x[0] - x[0] ** 3])  # noqa: E731
+    Fx = lambda x, p: np.array([[p - 3.0 * x[0] ** 2]])  # noqa: E731
+    Fp = lambda x, p: np.array([x[0]])  # noqa: E731
+
+    def eig(x, p):
+        if x[0] > 1.2:
+            raise co.Undefined("no eigenvalue beyond x = 1.2")
+        return np.array([p - 3.0 * x[0] ** 2])
+
+    return F, Fx, Fp, eig
+
+
+def test_forked_continuation_keeps_the_branches_and_skips_of_the_serial_loop(forked):
+    F, Fx, Fp, eig = pitchfork_with_an_undefined_start()
+    # starts on the same branch (skipped), a start where eig is undefined, starts of two branches
+    starts = [(np.array([0.0]), 0.5), (np.array([0.7]), 0.49), (np.array([-0.3]), 0.09), (np.array([0.0]), -0.5),
+              (np.array([1.3]), 1.69), (np.array([-0.9]), 0.81)]
+    runs = {}
+    for workers in (1, 2):
+        pools = forked(workers)
+        skipped: list = []
+        runs[workers] = (co.sweep_parameter(F, Fx, Fp, starts, -1.0, 2.0, eig, skipped=skipped, x_scale=0.5,
+                                            ds=0.02), skipped)
+        assert pools == [workers]
+    _branches_equal(runs[1][0], runs[2][0])
+    assert runs[1][1] == runs[2][1] == [(1.69, "no eigenvalue beyond x = 1.2")]
+    assert len(runs[1][0]) == 2  # the trivial branch and the parabola (its upper end stops where eig is undefined)
+
+
+def test_a_closed_branch_is_traced_once_whether_forked_or_not(forked):
+    """A closed branch (the Hopf toy's circle in (x, p) never closes; a circle F = x^2 + p^2 - 1 does): the
+    backward half a worker traced ahead is dropped."""
+    F = lambda x, p: np.array([x[0] ** 2 + p ** 2 - 1.0])  # noqa: E731
+    Fx = lambda x, p: np.array([[2.0 * x[0]]])  # noqa: E731
+    Fp = lambda x, p: np.array([2.0 * p])  # noqa: E731
+    eig = lambda x, p: np.array([-2.0 * x[0]])  # noqa: E731
+    starts = [(np.array([1.0]), 0.0), (np.array([-1.0]), 0.0)]
+    out = {}
+    for workers in (1, 2):
+        forked(workers)
+        out[workers] = co.sweep_parameter(F, Fx, Fp, starts, -2.0, 2.0, eig, ds=0.05, ds_max=0.1)
+    _branches_equal(out[1], out[2])
+    assert len(out[1]) == 1 and out[1][0].points[0].p == out[1][0].points[-1].p  # one closed branch
+
+
+def test_a_forked_sweep_of_a_rolling_disk_equals_the_serial_one(forked):
+    """The whole sweep (multistart at 5 sample rates, continuation, verdicts from the linearizations the workers
+    computed) of a nonholonomic model, forked and serial."""
+    model = mechsys.load(os.path.join(ROOT, "systems/rolling_disk.yaml"), {"lean": 0, "der(yaw)": 0})
+    results = {}
+    for workers in (1, 2):
+        pools = forked(workers)
+        results[workers] = sweep(model, "der(spin)", 2.0, 5.0, 31, {"lean": (-0.5, 0.5)})
+        assert pools == [workers, workers]  # the multistart, then the continuation
+    a, b = results[1], results[2]
+    _branches_equal(a.branches, b.branches)
+    assert a.bifurcations == b.bifurcations and a.notes == b.notes
+    assert [e["kind"] for e in a.bifurcations] == ["zero_eigenvalue"]  # upright rolling's critical spin rate
+
+
+def test_a_forked_sweep_of_the_indicator_equals_the_serial_one(forked):
+    """A holonomic model with four branches and two pitchforks (docs/equilibria.md, 8.9)."""
+    model = mechsys.load(os.path.join(ROOT, "systems/indicator.yaml"), {"Iz": 0.8, "Omega": 150})
+    results = {}
+    for workers in (1, 2):
+        forked(workers)
+        results[workers] = sweep(model, "omega1", -30.0, 30.0, 61)
+    a, b = results[1], results[2]
+    _branches_equal(a.branches, b.branches)
+    assert a.bifurcations == b.bifurcations and a.notes == b.notes and len(a.branches) == 4
+
+
+def test_workers_fork_only_once_and_say_how_many(monkeypatch):
+    monkeypatch.setenv(parallel.ENV, "2")
+    assert parallel.available() == 2
+    # inside a worker, no further processes (a batch command's workers, or this module's)
+    assert parallel.fork_map(lambda k: (k, parallel.available()), 3) == [(0, 1), (1, 1), (2, 1)]
+    monkeypatch.setenv(parallel.ENV, "one")
+    with pytest.raises(InputError, match="MECHSYS_WORKERS"):
+        parallel.available()
+    monkeypatch.setenv(parallel.ENV, "1")
+    assert parallel.fork_map(lambda k: os.getpid(), 2) == [os.getpid()] * 2  # serial: here
+
+
+def test_an_exception_in_a_worker_is_raised_here(monkeypatch):
+    monkeypatch.setenv(parallel.ENV, "2")
+
+    def task(k):
+        if k == 1:
+            raise ArithmeticError("math domain error")
+        return k
+
+    with pytest.raises(ArithmeticError, match="math domain error"):
+        parallel.fork_map(task, 3)
+
+
+def test_state_shared_back_from_the_workers(monkeypatch):
+    """share = (take, give): what each task left in its worker reaches this process."""
+    monkeypatch.setenv(parallel.ENV, "2")
+    memo: dict[int, int] = {}
+
+    def task(k):
+        memo[k] = k * k
+        return k
+
+    def take():
+        out = dict(memo)
+        memo.clear()
+        return out
+
+    assert parallel.fork_map(task, 4, (take, memo.update)) == [0, 1, 2, 3]
+    assert memo == {0: 0, 1: 1, 2: 4, 3: 9}
+
+
+# -- the search memo ----------------------------------------------------------------------------------------
+def test_the_search_is_remembered_per_problem_and_everything_it_reads(monkeypatch):
+    model = mechsys.load(os.path.join(ROOT, "systems/rolling_disk.yaml"))
+    problem = eq.make_problem(model)
+    p = parameter_values(model)
+    calls = []
+    original = eq._search
+    monkeypatch.setattr(eq, "_search", lambda *a: calls.append(1) or original(*a))
+    first = eq.solve_equilibria(problem, p)
+    again = eq.solve_equilibria(problem, p)
+    assert len(calls) == 1 and all(np.array_equal(x, y) for x, y in zip(first, again)) and len(first) == len(again)
+    fresh = eq.solve_equilibria(eq.make_problem(model), p)  # cached equals uncached
+    assert len(calls) == 2 and all(np.array_equal(x, y) for x, y in zip(first, fresh)) and len(first) == len(fresh)
+    # each of these is a new search: other parameters, another given rate, another seed, number of starts or box
+    rate = next(iter(problem.fixed_rates))
+    eq.solve_equilibria(problem, p * 1.01)
+    problem.fixed_rates[rate] += 1.0
+    eq.solve_equilibria(problem, p)
+    problem.fixed_rates[rate] -= 1.0
+    eq.solve_equilibria(problem, p, seed=1)
+    eq.solve_equilibria(problem, p, starts=10)
+    eq.solve_equilibria(problem, p, {"lean": (-0.5, 0.5)})
+    assert len(calls) == 7
+    eq.solve_equilibria(problem, p)
+    assert len(calls) == 7
+
+
+@pytest.mark.parametrize("path", ["systems/rolling_disk.yaml", "systems/bicycle.yaml"])
+def test_the_jacobian_of_the_steady_motion_equations_is_their_derivative(path):
+    """dF/dz (gathered from the compiled M, A and dE/d(q, u) in one indexing) against central differences of F,
+    at a random point: every unknown (shape coordinates, rates, accelerations, multipliers) and every row."""
+    model = mechsys.load(os.path.join(ROOT, path))
+    problem = eq.make_problem(model)
+    p = parameter_values(model)
+    z = np.random.default_rng(3).uniform(-0.5, 0.5, len(problem.unknowns))
+    J = problem.J(z, p)
+    h = 1e-6
+    numeric = np.column_stack([(problem.F(z + h * e, p) - problem.F(z - h * e, p)) / (2 * h)
+                               for e in np.eye(len(z))])
+    assert J.shape == numeric.shape
+    assert np.max(np.abs(J - numeric)) <= 1e-6 * max(1.0, np.max(np.abs(J)))
