@@ -233,3 +233,15 @@ def test_the_output_grid_does_not_set_the_step_of_a_driven_model(method):
     assert np.allclose(fine.t[common], coarse.t)
     assert np.allclose(fine.q[common], coarse.q, rtol=1e-7, atol=1e-7)
     assert max(np.max(coarse.residual), np.max(fine.residual)) <= 1e-10
+
+
+def test_a_prescribed_coordinate_costs_no_more_steps_than_its_generalized_force():
+    """Issue 13's goal: the indicator with its prescribed platform and rotor angles (drive rows) takes at most 1.5x
+    the steps of the same equation (7.8) written by hand as one coordinate with a generalized force
+    (tests/data/indicator_generalized_force.yaml), and both give the same tilt."""
+    driven = simulate(mechsys.load(SYSTEMS_DIR / "indicator.yaml", release_prescribed=True), 25.0, dt=0.01)
+    reduced = simulate(mechsys.load(DATA_DIR / "indicator_generalized_force.yaml"), 25.0, dt=0.01)
+    assert driven.method == reduced.method == "native"
+    assert driven.steps <= 1.5 * reduced.steps, (driven.steps, reduced.steps)
+    beta = driven.q[:, driven.coordinates.index("beta")]
+    assert np.max(np.abs(beta - reduced.q[:, 0])) <= 1e-6
