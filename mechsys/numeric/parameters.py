@@ -19,9 +19,9 @@ def parameter_values(model: MechanicalModel, changes: dict[str, float] | None = 
     followers = _followers(doc, frozenset(changes))
     if not followers:  # nothing is defined from them (a continuation's usual case: thousands of calls)
         out = np.array([doc.parameter_values[n] for n in doc.parameters], dtype=float)
-        index = {sym: k for k, sym in enumerate(model.parameter_symbols)}
+        names = list(doc.parameters)  # the order of model.parameter_symbols
         for name, value in changes.items():
-            out[index[doc.parameters[name]]] = float(value)
+            out[names.index(name)] = float(value)
         return out
     values = {sym: doc.parameter_values[name] for name, sym in doc.parameters.items()}
     for name in changes:

@@ -101,9 +101,13 @@ class SweptParameter:
     drates: Callable[[float, np.ndarray], np.ndarray]
 
     def at(self, p: float) -> np.ndarray:
-        P = self.pvec(p)
+        last = self.__dict__.get("_last")
+        if last is None or last[0] != p:  # F, its Jacobian and dF/dp of one point ask for the same p
+            P = self.pvec(p)
+            last = self.__dict__["_last"] = (p, P, [float(r) for r in self.rates(p, P)])
+        _, P, rates = last
         fixed = self.problem.fixed_rates
-        fixed.update(zip(list(fixed), (float(r) for r in self.rates(p, P))))
+        fixed.update(zip(list(fixed), rates))
         self.problem.current_parameters = P
         return P
 

@@ -602,25 +602,32 @@ def continue_branch(F: ArrayFn, Fx: ArrayFn, Fp: ArrayFn, x0: np.ndarray | Seque
 def _on_branch(cont: _Continuation, branch: Branch, z: np.ndarray) -> bool:
     """Whether the corrected point z lies on the traced branch (re-corrected onto it, not just near a chord)."""
     tr = cont.tr
-    zs = [tr.z_of(pt.x, pt.p) for pt in branch.points]
+    key = tr.s.tobytes()
+    cached = branch.__dict__.get("_z")
+    if cached is None or cached[0] != key or len(cached[1]) != len(branch.points):
+        cached = branch.__dict__["_z"] = (key, np.array([tr.z_of(pt.x, pt.p) for pt in branch.points]))
+    zs = cached[1]
     scale = 1.0 + float(np.max(np.abs(z)))
-    for a, b in zip(zs[:-1], zs[1:]):
-        d = b - a
-        L = float(np.linalg.norm(d))
-        if L == 0.0:
-            if np.linalg.norm(z - a) <= 1e-7 * scale:
+    if len(zs) == 1:
+        return bool(np.linalg.norm(zs[0] - z) <= 1e-7 * scale)
+    a, d = zs[:-1], np.diff(zs, axis=0)
+    L = np.linalg.norm(d, axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        t = d / L[:, None]
+        s = np.einsum("ij,ij->i", t, z - a)
+        off = np.linalg.norm(z - (a + s[:, None] * t), axis=1)
+    near = (L > 0.0) & (s >= -1e-9 * scale) & (s <= L * (1 + 1e-9)) & (off <= L)
+    for k in range(len(L)):  # in order along the branch, as the segments come
+        if L[k] == 0.0:
+            if np.linalg.norm(z - a[k]) <= 1e-7 * scale:
                 return True
             continue
-        t = d / L
-        s = float(t @ (z - a))
-        if s < -1e-9 * scale or s > L * (1 + 1e-9):
+        if not near[k]:
             continue
-        if np.linalg.norm(z - (a + s * t)) > L:
-            continue
-        res = tr.newton(a + s * t, t)
+        res = tr.newton(a[k] + s[k] * t[k], t[k])
         if res is not None and np.linalg.norm(res[0] - z) <= 1e-6 * scale:
             return True
-    return len(zs) == 1 and np.linalg.norm(zs[0] - z) <= 1e-7 * scale
+    return False
 
 
 def sweep_parameter(F: ArrayFn, Fx: ArrayFn, Fp: ArrayFn, starts: list[tuple[np.ndarray, float]], p_min: float,
