@@ -311,3 +311,32 @@ def test_elastic_spherical_pendulum_azimuth_and_its_steady_motions(tmp_path):
     assert sorted(round(e["coordinates"]["r"], 6) for e in on_axis) == [round(L0 - m * g / k, 6), round(L0 + m * g / k, 6)]
     assert all(e["stability"] == "undecided" and e["reason"].startswith("coordinate singularity: az moves no mass")
                for e in on_axis)
+
+
+def test_the_physical_state_code_is_cached_and_equals_a_fresh_one(tmp_path, monkeypatch):
+    """charts._state_fn (the physical state that tells two roots are one steady motion) is generated once per
+    model structure and read back from the cache: the same numbers as freshly generated code, and an entry that
+    is not arithmetic code is ignored and replaced."""
+    import mechsys
+    from mechsys.analysis.equilibrium import charts
+    from mechsys.numeric import cache
+
+    monkeypatch.setenv("MECHSYS_CACHE", str(tmp_path / "cache"))
+    path = ROOT / "systems" / "rolling_disk.yaml"
+    generated = []
+    real = charts.generate_source
+    monkeypatch.setattr(charts, "generate_source", lambda *a: generated.append(1) or real(*a))
+    args = np.random.default_rng(2).uniform(-1, 1, 3 * 7 + 1)
+
+    def state():
+        model = mechsys.load(path)  # a new model object: a new command
+        p = [model.parameters[s.name] for s in model.parameter_symbols]
+        q, u = args[:len(model.q)], args[len(model.q):2 * len(model.q)]
+        return np.array(charts._state_fn(model)(*q, *u, *p, 0.3))
+
+    fresh = state()
+    cached = state()
+    assert generated == [1] and np.array_equal(fresh, cached) and fresh.size > 0
+    model = mechsys.load(path)
+    cache.store(cache.model_key(model, "chart-state"), {"source": "import os\nos.system('true')"})
+    assert np.array_equal(state(), fresh) and generated == [1, 1]

@@ -166,6 +166,7 @@ def test_state_shared_back_from_the_workers(monkeypatch):
 
 # -- the search memo ----------------------------------------------------------------------------------------
 def test_the_search_is_remembered_per_problem_and_everything_it_reads(monkeypatch):
+    monkeypatch.setattr(eq, "_disk_key", lambda *a: None)  # this process's memo alone (the disk: the next test)
     model = mechsys.load(os.path.join(ROOT, "systems/rolling_disk.yaml"))
     problem = eq.make_problem(model)
     p = parameter_values(model)
@@ -205,3 +206,33 @@ def test_the_jacobian_of_the_steady_motion_equations_is_their_derivative(path):
                                for e in np.eye(len(z))])
     assert J.shape == numeric.shape
     assert np.max(np.abs(J - numeric)) <= 1e-6 * max(1.0, np.max(np.abs(J)))
+
+
+def test_a_search_stored_on_disk_equals_a_fresh_one_and_is_verified(monkeypatch, tmp_path):
+    """The next command on the model (modes after equilibria) reads the search back: the same roots, bit for bit,
+    no Newton run; another initial value (where the starts come from) is another search; a stored entry whose
+    'root' is not one is ignored and the search runs again."""
+    from mechsys.numeric import cache
+
+    monkeypatch.setenv("MECHSYS_CACHE", str(tmp_path / "cache"))
+    path = os.path.join(ROOT, "systems/rolling_disk.yaml")
+    calls, keys = [], []
+    search, disk_key = eq._search, eq._disk_key
+    monkeypatch.setattr(eq, "_search", lambda *a: calls.append(1) or search(*a))
+    monkeypatch.setattr(eq, "_disk_key", lambda *a: keys.append(disk_key(*a)) or keys[-1])
+
+    def solve(overrides=None):
+        model = mechsys.load(path, overrides)  # a new model and problem each time: a new command
+        return eq.solve_equilibria(eq.make_problem(model), parameter_values(model))
+
+    first = solve()
+    again = solve()
+    assert len(calls) == 1 and keys[0] == keys[1] and len(first) == len(again) >= 1
+    assert all(np.array_equal(x, y) for x, y in zip(first, again))
+    solve({"lean": 0.2})
+    assert len(calls) == 2 and keys[2] != keys[0]
+    entry = cache.load(keys[0])
+    entry["roots"][0] = [r + 0.1 for r in entry["roots"][0]]
+    cache.store(keys[0], entry)
+    tampered = solve()
+    assert len(calls) == 3 and all(np.array_equal(x, y) for x, y in zip(first, tampered))

@@ -18,6 +18,9 @@ from typing import Any, Callable
 
 ENV = "MECHSYS_WORKERS"
 
+#: (take, give): what a worker hands back after each task, and what this process does with it.
+Share = tuple[Callable[[], Any], Callable[[Any], None]]
+
 #: The tasks of the open pools by token, set before their workers are forked (inherited, never pickled).
 _TASKS: dict[int, tuple[Callable[[int], Any], Callable[[], Any] | None]] = {}
 
@@ -54,8 +57,7 @@ class Workers:
     back: a worker calls ``take()`` after each task (e.g. the new entries of a memo) and this process
     ``give(taken)`` with it when it reads the result."""
 
-    def __init__(self, task: Callable[[int], Any], count: int,
-                 share: tuple[Callable[[], Any], Callable[[Any], None]] | None = None) -> None:
+    def __init__(self, task: Callable[[int], Any], count: int, share: Share | None = None) -> None:
         self.task = task
         self.share = share
         self.processes = min(available(), max(count, 1))
@@ -92,8 +94,7 @@ class Workers:
             _TASKS.pop(self._token, None)
 
 
-def fork_map(task: Callable[[int], Any], count: int,
-             share: tuple[Callable[[], Any], Callable[[Any], None]] | None = None) -> list[Any]:
+def fork_map(task: Callable[[int], Any], count: int, share: Share | None = None) -> list[Any]:
     """[task(0), ..., task(count - 1)], spread over forked workers when more than one process is available."""
     with Workers(task, count, share) as workers:
         handles = [workers.submit(k) for k in range(count)]

@@ -275,8 +275,9 @@ def sweep(model: MechanicalModel, name: str, start: float, stop: float, points: 
             bif.x = D * bif.x
     _check_all_equations(problem, branches, par.at, name)
     artefacts = {id(b) for b in _point_verdicts(problem, branches, par.at)}
+    states: dict = {}  # physical states of branch points, shared by the pairs compared
     twins = {id(b) for k, b in enumerate(branches) if id(b) not in artefacts
-             and any(id(a) not in artefacts and _same_family(problem, a, b, par.at) for a in branches[:k])}
+             and any(id(a) not in artefacts and _same_family(problem, a, b, par.at, states) for a in branches[:k])}
     branches = [b for b in branches if id(b) not in artefacts | twins]
     nreport = len(problem.free) + len(problem.rate_unknowns)
     names = list(problem.free) + [f"der({c})" for c in problem.rate_unknowns]
@@ -390,7 +391,7 @@ def _point_verdicts(problem: EquilibriumProblem, branches: list[Branch], at) -> 
     return artefacts
 
 
-def _same_family(problem: EquilibriumProblem, a: Branch, b: Branch, at) -> bool:
+def _same_family(problem: EquilibriumProblem, a: Branch, b: Branch, at, memo: dict | None = None) -> bool:
     """``b`` is ``a`` in other coordinates (a rotation sequence reaches every orientation twice): at a parameter
     value both reached, the same physical steady motion."""
     from mechsys.analysis.equilibrium.charts import same_motion
@@ -399,7 +400,7 @@ def _same_family(problem: EquilibriumProblem, a: Branch, b: Branch, at) -> bool:
         pa = next((pt for pt in a.points if abs(pt.p - pb.p) <= 1e-12 * (1 + abs(pb.p))), None)
         if pa is not None:
             P = at(pb.p)
-            return same_motion(problem, problem.equilibrium(pa.x), problem.equilibrium(pb.x), P)
+            return same_motion(problem, problem.equilibrium(pa.x), problem.equilibrium(pb.x), P, memo)
     return False
 
 

@@ -11,7 +11,9 @@ import numpy as np
 
 from mechsys.analysis.equilibrium.equilibria import Equilibrium, EquilibriumProblem
 from mechsys.numeric.parameters import parameter_values
-from mechsys.numeric.lambdify import compile_exprs
+from mechsys.numeric import cache
+from mechsys.numeric.lambdify import compile_exprs, generate_source
+from mechsys.numeric.runtime import function_from_source
 from mechsys.numeric.rotations import alternatives, angles_of, canonical, rate_matrix, ratio, rotation
 
 #: The chart is singular where the smallest singular value of the joint's map (angle rates -> angular velocity),
@@ -148,15 +150,23 @@ def _state_fn(model):
     physical state are one steady motion, whatever coordinates describe it."""
     memo = model.__dict__.setdefault("_chart_memo", {})
     if "state" not in memo:
-        import sympy as sp
+        # the generated code is cached on disk like the simulation's (a bicycle's: a second of CSE per command)
+        key = cache.model_key(model, "chart-state")
+        entry = cache.load(key) or {}
+        try:
+            memo["state"] = function_from_source(entry["source"])
+        except (KeyError, TypeError, ValueError, SyntaxError):  # absent, or not what this version writes
+            import sympy as sp
 
-        parts = []
-        for body, r, _v, w, frame in model._body_kinematics:
-            parts += list(r) + list(model.velocity(r))
-            if not body.particle:
-                parts += list(frame.R) + list(frame.R * w)
-        args = list(model.q) + list(model.u) + list(model.parameter_symbols) + [model.t]
-        memo["state"] = compile_exprs([sp.sympify(x) for x in parts], args)
+            parts = []
+            for body, r, _v, w, frame in model._body_kinematics:
+                parts += list(r) + list(model.velocity(r))
+                if not body.particle:
+                    parts += list(frame.R) + list(frame.R * w)
+            args = list(model.q) + list(model.u) + list(model.parameter_symbols) + [model.t]
+            source = generate_source([sp.sympify(x) for x in parts], args)
+            cache.store(key, {"source": source})
+            memo["state"] = function_from_source(source)
     return memo["state"]
 
 
@@ -167,17 +177,29 @@ def _physical(problem: EquilibriumProblem, e: Equilibrium, p: np.ndarray, shift:
     return np.array(_state_fn(model)(*q, *u, *p, 0.0), dtype=float)
 
 
-def same_motion(problem: EquilibriumProblem, a: Equilibrium, b: Equilibrium, p: np.ndarray) -> bool:
+def same_motion(problem: EquilibriumProblem, a: Equilibrium, b: Equilibrium, p: np.ndarray,
+                memo: dict | None = None) -> bool:
     """``a`` and ``b`` are one steady motion: the same physical state of every massive link, up to a half turn of
     each cyclic angle (a rotation sequence reaches every orientation twice, (psi, theta, phi) and
-    (psi + pi, pi - theta, phi + pi); a prismatic coordinate along a turning axis reaches each point twice)."""
+    (psi + pi, pi - theta, phi + pi); a prismatic coordinate along a turning axis reaches each point twice).
+    ``memo``: the physical states already computed, by every number they read (a sweep compares many pairs)."""
     if any(abs(a.rates.get(c, 0.0) - b.rates.get(c, 0.0)) > 1e-7 * (1 + abs(a.rates.get(c, 0.0))) for c in a.rates):
         return False
-    ref = _physical(problem, a, p, {})
+
+    def physical(e: Equilibrium, shift: dict[str, float]) -> np.ndarray:
+        if memo is None:
+            return _physical(problem, e, p, shift)
+        key = (tuple(e.coordinates.items()), tuple(e.rates.items()), np.asarray(p, dtype=float).tobytes(),
+               tuple(shift.items()))
+        if key not in memo:
+            memo[key] = _physical(problem, e, p, shift)
+        return memo[key]
+
+    ref = physical(a, {})
     tol = 1e-7 * (1.0 + float(np.max(np.abs(ref)))) if ref.size else 1e-7
     turning = [c for c in problem.cyclic if problem.angles.get(c, False)][:3]
     for halves in itertools.product((0.0, math.pi), repeat=len(turning)):
-        if np.max(np.abs(_physical(problem, b, p, dict(zip(turning, halves))) - ref), initial=0.0) <= tol:
+        if np.max(np.abs(physical(b, dict(zip(turning, halves))) - ref), initial=0.0) <= tol:
             return True
     return False
 

@@ -7,7 +7,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 from scipy.optimize import brentq, linear_sum_assignment
 
-from mechsys.numeric.parallel import Workers
+from mechsys.numeric.parallel import Share, Workers
 
 ArrayFn = Callable[[np.ndarray, float], np.ndarray]
 
@@ -632,7 +632,7 @@ def _on_branch(cont: _Continuation, branch: Branch, z: np.ndarray) -> bool:
 
 def sweep_parameter(F: ArrayFn, Fx: ArrayFn, Fp: ArrayFn, starts: list[tuple[np.ndarray, float]], p_min: float,
                     p_max: float, eig: ArrayFn, skipped: list[tuple[float, str]] | None = None,
-                    share: tuple[Callable[[], Any], Callable[[Any], None]] | None = None, **kw: Any) -> list[Branch]:
+                    share: Share | None = None, **kw: Any) -> list[Branch]:
     """Trace each start both ways (direction -1 and +1) and merge the two halves into one branch along the arc.
 
     The merged points run from the end of the direction -1 half, through the start, to the end of the +1 half;

@@ -470,20 +470,81 @@ def solve_equilibria(problem: EquilibriumProblem, p: np.ndarray, search: dict | 
                      seed: int = 0, report: SearchReport | None = None) -> list[np.ndarray]:
     """All roots found from multistart deflated Newton inside the search box (multipliers start from lstsq)."""
     plan = search_plan(problem, search, starts) if report is None else report
-    # remembered per problem: a sweep through the file's parameter values repeats the search equilibria made
-    # there. The key is everything the search reads besides the problem's equations
+    # remembered per problem (a sweep through the file's parameter values repeats the search equilibria made there)
+    # and on disk (the next command on the model: modes after equilibria). The key is everything the search reads
+    # besides the problem's equations; a stored root is used only when it verifies
     key = (np.asarray(p, dtype=float).tobytes(), tuple(sorted(problem.fixed_rates.items())),
            tuple(sorted(getattr(problem, "given", {}).items())), repr(sorted((search or {}).items())), plan.starts,
            repr(plan.region), seed)
     memo = problem.__dict__.setdefault("_searches", {})
-    if key in memo:
-        roots, outside = memo[key]
-        plan.outside += outside
-        return [z.copy() for z in roots]
-    before = len(plan.outside)
-    roots = _search(problem, p, plan, seed)
-    memo[key] = ([z.copy() for z in roots], plan.outside[before:])
-    return roots
+    if key not in memo:
+        disk = _disk_key(problem, key)
+        stored = _stored_search(problem, p, disk)
+        if stored is None:
+            before = len(plan.outside)
+            roots = _search(problem, p, plan, seed)
+            stored = (roots, plan.outside[before:])
+            plan.outside = plan.outside[:before]  # added back below, as from the memo
+            _store_search(disk, stored)
+        memo[key] = ([z.copy() for z in stored[0]], list(stored[1]))
+    roots, outside = memo[key]
+    plan.outside += outside
+    return [z.copy() for z in roots]
+
+
+def _disk_key(problem: EquilibriumProblem, key: tuple) -> str | None:
+    """The on-disk key of a search: the model's structure, names and code (cache.model_key), the search's own code,
+    the problem as posed (class, unknowns, split of a nonholonomic one), the starts' source (the file's initial
+    values and rates) and every number of the in-memory key; None when the cache is off."""
+    import hashlib
+    import json
+    from pathlib import Path
+
+    from mechsys.numeric import cache
+
+    if cache.cache_dir() is None:
+        return None
+    model = problem.model
+    here = Path(__file__).resolve().parent
+    code = hashlib.sha256(b"".join((here / f).read_bytes() for f in ("equilibria.py", "nonholonomic.py")))
+    payload = {"model": cache.model_key(model, "steady-search"), "code": code.hexdigest(),
+               "problem": type(problem).__name__, "unknowns": [str(u) for u in problem.unknowns],
+               "free": list(problem.free), "rates": list(problem.rate_unknowns),
+               "split": repr(getattr(problem, "split", None)),
+               "initial": sorted((str(k), float(v)) for k, v in model.doc.initial.items()),
+               "initial_rate": sorted((str(k), float(v)) for k, v in model.doc.initial_rate.items()),
+               "search": [key[0].hex(), *map(repr, key[1:])]}
+    return hashlib.sha256(json.dumps(payload).encode()).hexdigest()[:32]
+
+
+def _stored_search(problem: EquilibriumProblem, p: np.ndarray, disk: str | None):
+    """(roots, outside) of a stored search, each root verified to be one (F = 0 as _polish accepts it); None when
+    absent or when anything in it does not verify."""
+    from mechsys.numeric import cache
+
+    entry = cache.load(disk) if disk is not None else None
+    if entry is None:
+        return None
+    try:
+        roots = [np.array(r, dtype=float) for r in entry["roots"]]
+        outside = [str(x) for x in entry["outside"]]
+        for z in roots:
+            if z.shape != (len(problem.unknowns),) or not np.all(np.isfinite(z)):
+                return None
+            F, J = problem.F(z, p), problem.J(z, p)
+            if not (np.all(np.isfinite(F)) and np.all(np.isfinite(J))) or \
+                    np.max(np.abs(F), initial=0.0) > 1e-10 * max(1.0, float(np.max(np.abs(J), initial=0.0))):
+                return None
+    except (KeyError, TypeError, ValueError, ArithmeticError):
+        return None
+    return roots, outside
+
+
+def _store_search(disk: str | None, stored: tuple[list[np.ndarray], list[str]]) -> None:
+    from mechsys.numeric import cache
+
+    if disk is not None:
+        cache.store(disk, {"roots": [[float(x) for x in z] for z in stored[0]], "outside": list(stored[1])})
 
 
 def _search(problem: EquilibriumProblem, p: np.ndarray, plan: SearchReport, seed: int) -> list[np.ndarray]:
