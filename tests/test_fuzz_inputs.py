@@ -418,7 +418,7 @@ SLOW_SEED, SLOW_HOW = fz.fuzz_seed()  # fixed by default; CI draws a new one eve
 
 @pytest.mark.slow
 @seed(SLOW_SEED)
-@settings(max_examples=500, **{**COMMON, "derandomize": False})  # about 45 s
+@settings(max_examples=350, **{**COMMON, "derandomize": False})  # about 55 s in CI; the seed rotates every run
 @given(data=st.data())
 def test_fuzz_model_files_slow(data: st.DataObject, workdir: Path) -> None:
     note(f"seed {SLOW_SEED} ({SLOW_HOW}): MECHSYS_FUZZ_SEED={SLOW_SEED} reproduces this run")
