@@ -714,6 +714,7 @@ class _Indices:
 
 
 def _indices(names: list[str], split: Split) -> _Indices:
+    """The positions of a split, worked out once (a sweep linearizes thousands of points with one split)."""
     key = (tuple(names), repr(split))
     memo = _INDICES
     if key not in memo:
