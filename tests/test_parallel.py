@@ -210,8 +210,8 @@ def test_the_jacobian_of_the_steady_motion_equations_is_their_derivative(path):
 
 def test_a_search_stored_on_disk_equals_a_fresh_one_and_is_verified(monkeypatch, tmp_path):
     """The next command on the model (modes after equilibria) reads the search back: the same roots, bit for bit,
-    no Newton run; another initial value (where the starts come from) is another search; a stored entry whose
-    'root' is not one is ignored and the search runs again."""
+    no Newton run; another initial value (where the starts come from) or formulation is another search; a stored
+    entry whose 'root' is not one is ignored and the search runs again."""
     from mechsys.numeric import cache
 
     monkeypatch.setenv("MECHSYS_CACHE", str(tmp_path / "cache"))
@@ -236,3 +236,9 @@ def test_a_search_stored_on_disk_equals_a_fresh_one_and_is_verified(monkeypatch,
     cache.store(keys[0], entry)
     tampered = solve()
     assert len(calls) == 3 and all(np.array_equal(x, y) for x, y in zip(first, tampered))
+    # the same steady motions posed from Lagrange's equations: other residual rows, another search
+    from mechsys.analysis.equilibrium.nonholonomic import NonholonomicProblem
+
+    model = mechsys.load(path)
+    eq.solve_equilibria(NonholonomicProblem(model, method="lagrange"), parameter_values(model))
+    assert len(calls) == 4 and keys[-1] != keys[0]

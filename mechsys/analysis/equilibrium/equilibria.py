@@ -494,8 +494,8 @@ def solve_equilibria(problem: EquilibriumProblem, p: np.ndarray, search: dict | 
 
 def _disk_key(problem: EquilibriumProblem, key: tuple) -> str | None:
     """The on-disk key of a search: the model's structure, names and code (cache.model_key), the search's own code,
-    the problem as posed (class, unknowns, split of a nonholonomic one), the starts' source (the file's initial
-    values and rates) and every number of the in-memory key; None when the cache is off."""
+    the problem as posed (class, formulation, unknowns, split of a nonholonomic one), the starts' source (the
+    file's initial values and rates) and every number of the in-memory key; None when the cache is off."""
     import hashlib
     import json
     from pathlib import Path
@@ -508,7 +508,8 @@ def _disk_key(problem: EquilibriumProblem, key: tuple) -> str | None:
     here = Path(__file__).resolve().parent
     code = hashlib.sha256(b"".join((here / f).read_bytes() for f in ("equilibria.py", "nonholonomic.py")))
     payload = {"model": cache.model_key(model, "steady-search"), "code": code.hexdigest(),
-               "problem": type(problem).__name__, "unknowns": [str(u) for u in problem.unknowns],
+               "problem": type(problem).__name__, "method": str(getattr(problem, "method", "")),
+               "unknowns": [str(u) for u in problem.unknowns],
                "free": list(problem.free), "rates": list(problem.rate_unknowns),
                "split": repr(getattr(problem, "split", None)),
                "initial": sorted((str(k), float(v)) for k, v in model.doc.initial.items()),
