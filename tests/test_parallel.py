@@ -103,7 +103,8 @@ def test_a_forked_sweep_of_a_rolling_disk_equals_the_serial_one(forked):
     for workers in (1, 2):
         pools = forked(workers)
         results[workers] = sweep(model, "der(spin)", 2.0, 5.0, 31, {"lean": (-0.5, 0.5)})
-        assert pools == [workers, workers]  # the multistart, then the continuation
+        # the multistart, the continuation, then the review of the branches (one branch here: no fork)
+        assert pools == [workers, workers, 1]
     a, b = results[1], results[2]
     _branches_equal(a.branches, b.branches)
     assert a.bifurcations == b.bifurcations and a.notes == b.notes
@@ -120,6 +121,34 @@ def test_a_forked_sweep_of_the_indicator_equals_the_serial_one(forked):
     a, b = results[1], results[2]
     _branches_equal(a.branches, b.branches)
     assert a.bifurcations == b.bifurcations and a.notes == b.notes and len(a.branches) == 4
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_the_review_of_the_branches_raises_in_the_serial_order(forked, monkeypatch, workers):
+    """Every branch's residual check comes before any verdict: a residual failing on branch 2 is the error even
+    when branch 1's verdicts raise (forked or not); without it, the verdicts' own error."""
+    from mechsys.analysis.equilibrium import bifurcation
+    from mechsys.errors import AnalysisError
+
+    class Residual:  # F = x: a point with x != 0 does not satisfy the equations
+        def F(self, x, P):
+            return np.array([x[0]])
+
+        def J(self, x, P):
+            return np.array([[1.0]])
+
+    def branch(p, x):
+        return co.Branch(points=[co.BranchPoint(p=p, x=np.array([x]), eigenvalues=np.zeros(0), stable=False)])
+
+    def verdicts(problem, b, at):
+        raise RuntimeError("no verdict")
+
+    forked(workers)
+    monkeypatch.setattr(bifurcation, "_verdicts", verdicts)
+    with pytest.raises(AnalysisError, match="on branch 2 at v = 1 the equilibrium equations do not all hold"):
+        bifurcation._review(Residual(), [branch(0.0, 0.0), branch(1.0, 0.5)], lambda p: np.zeros(0), "v")
+    with pytest.raises(RuntimeError, match="no verdict"):
+        bifurcation._review(Residual(), [branch(0.0, 0.0), branch(1.0, 0.0)], lambda p: np.zeros(0), "v")
 
 
 def test_workers_fork_only_once_and_say_how_many(monkeypatch):

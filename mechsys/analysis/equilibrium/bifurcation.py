@@ -273,8 +273,7 @@ def sweep(model: MechanicalModel, name: str, start: float, stop: float, points: 
             pt.x = D * pt.x
         for bif in branch.bifurcations:
             bif.x = D * bif.x
-    _check_all_equations(problem, branches, par.at, name)
-    artefacts = {id(b) for b in _point_verdicts(problem, branches, par.at)}
+    artefacts = {id(b) for b in _review(problem, branches, par.at, name)}
     states: dict = {}  # physical states of branch points, shared by the pairs compared
     twins = {id(b) for k, b in enumerate(branches) if id(b) not in artefacts
              and any(id(a) not in artefacts and _same_family(problem, a, b, par.at, states) for a in branches[:k])}
@@ -345,47 +344,76 @@ def _independent_rows(J: np.ndarray) -> list[int]:
     return sorted(int(k) for k in pivots[:n])
 
 
-def _check_all_equations(problem: EquilibriumProblem, branches: list[Branch], at, name: str) -> None:
-    """Every continued point must satisfy ALL equilibrium equations, not only the ones continuation solved."""
-    for k, branch in enumerate(branches, start=1):
-        for pt in branch.points:
-            P = at(pt.p)
-            F = problem.F(pt.x, P)
-            scale = 1.0 + float(np.max(np.abs(problem.J(pt.x, P)), initial=0.0))
-            if not np.all(np.isfinite(F)) or float(np.max(np.abs(F), initial=0.0)) > 1e-6 * scale:
-                raise AnalysisError(f"--sweep {name}: on branch {k} at {name} = {pt.p:g} the equilibrium equations "
-                                    f"do not all hold (residual {float(np.max(np.abs(F))):.3g}): the steady-motion "
-                                    "equations are over-determined there, and continuation cannot follow them")
+def _residual_error(problem: EquilibriumProblem, branch: Branch, at, name: str, k: int) -> str | None:
+    """Every continued point must satisfy ALL equilibrium equations, not only the ones continuation solved: the
+    message for the first point of branch k that does not, or None."""
+    for pt in branch.points:
+        P = at(pt.p)
+        F = problem.F(pt.x, P)
+        worst = float(np.max(np.abs(F), initial=0.0))
+        if np.all(np.isfinite(F)) and worst <= 1e-6:
+            continue  # within the tolerance whatever the scale (>= 1): the Jacobian is not needed
+        scale = 1.0 + float(np.max(np.abs(problem.J(pt.x, P)), initial=0.0))
+        if not np.all(np.isfinite(F)) or worst > 1e-6 * scale:
+            return (f"--sweep {name}: on branch {k} at {name} = {pt.p:g} the equilibrium equations do not all hold "
+                    f"(residual {float(np.max(np.abs(F))):.3g}): the steady-motion equations are over-determined "
+                    "there, and continuation cannot follow them")
+    return None
 
 
 STABLE = ("stable", "asymptotically stable")
 
 
-def _point_verdicts(problem: EquilibriumProblem, branches: list[Branch], at) -> list[Branch]:
-    """Each branch point gets the verdict a single equilibrium would (energy, Routh and gyroscopic arguments
-    included), not only the eigenvalue test: a conservative branch is stable where the point analysis says so
-    (the eigenvalue test alone drew every conservative branch unstable). Points at a gimbal lock are classified
-    in a regular chart as `equilibria` does (charts.py); the branches returned are those made only of points
-    that are no steady motion in a regular chart (artefacts of the singular chart)."""
+def _verdicts(problem: EquilibriumProblem, branch: Branch, at) -> tuple[list[str], int]:
+    """The verdict a single equilibrium would get at each point of the branch (energy, Routh and gyroscopic
+    arguments included), and how many points are no steady motion in a regular chart."""
     from mechsys.analysis.equilibrium.charts import Unchartable, reclassify, singularities
 
-    artefacts = []
-    for branch in branches:
-        bad = 0
-        for pt in branch.points:
-            P = at(pt.p)  # first: the given rates of the point
-            e = problem.equilibrium(pt.x)
-            assess(problem, e, P)
-            found = singularities(problem.model, e.coordinates, P)
-            if found:
-                try:
-                    if reclassify(problem, e, found[0], P) is None:
-                        bad += 1
-                        e.stability = "undecided"
-                except (Unchartable, np.linalg.LinAlgError):
+    verdicts, bad = [], 0
+    for pt in branch.points:
+        P = at(pt.p)  # first: the given rates of the point
+        e = problem.equilibrium(pt.x)
+        assess(problem, e, P)
+        found = singularities(problem.model, e.coordinates, P)
+        if found:
+            try:
+                if reclassify(problem, e, found[0], P) is None:
+                    bad += 1
                     e.stability = "undecided"
-            pt.verdict = e.stability
-            pt.stable = e.stability in STABLE
+            except (Unchartable, np.linalg.LinAlgError):
+                e.stability = "undecided"
+        verdicts.append(e.stability)
+    return verdicts, bad
+
+
+def _review(problem: EquilibriumProblem, branches: list[Branch], at, name: str) -> list[Branch]:
+    """Check every point against all the equations (AnalysisError for the first branch that fails), then give
+    each point the verdict a single equilibrium would: a conservative branch is stable where the point analysis
+    says so (the eigenvalue test alone drew every conservative branch unstable), and points at a gimbal lock are
+    classified in a regular chart as `equilibria` does (charts.py). Returns the branches made only of points that
+    are no steady motion in a regular chart (artefacts of the singular chart). The branches are reviewed in
+    forked workers (numeric/parallel.py), with the errors raised in the serial loop's order."""
+
+    def review(k: int):
+        error = _residual_error(problem, branches[k], at, name, k + 1)
+        if error is not None:
+            return error, None
+        try:
+            return None, _verdicts(problem, branches[k], at)
+        except Exception as exc:  # noqa: BLE001 - raised below, after every branch's residual check
+            return None, exc
+
+    reviewed = fork_map(review, len(branches))
+    for error, _ in reviewed:
+        if error is not None:
+            raise AnalysisError(error)
+    artefacts = []
+    for branch, (_, found) in zip(branches, reviewed):
+        if isinstance(found, Exception):
+            raise found
+        verdicts, bad = found
+        for pt, verdict in zip(branch.points, verdicts):
+            pt.verdict, pt.stable = verdict, verdict in STABLE
         if branch.points and bad == len(branch.points):
             artefacts.append(branch)
     return artefacts
