@@ -265,3 +265,27 @@ def test_a_long_table_prints_as_aligned_text_with_every_row():
     assert lines[0] == "branches over v" and lines[1].split() == ["branch", "v", "lean"]
     assert len(lines) == 3 + LONG_TABLE + 5 + 1 and lines[-1] == "  a note"
     assert lines[-2].split() == ["1", "30.4", "-7.728829e-15"]
+
+
+def test_a_parameter_the_residual_does_not_read_has_an_exact_zero_derivative():
+    """The bicycle's speed v sets only the given rates: its generated residual reads no v, so dE/dv (what a
+    speed sweep's predictor asks for) is returned as zeros without evaluating E, exactly what the central
+    difference gives; g is read and its derivative is the difference as before."""
+    import mechsys
+    from mechsys.analysis.equilibrium import equilibria as eq
+    from mechsys.numeric.parameters import parameter_values
+    from tests.helpers import SYSTEMS_DIR
+
+    model = mechsys.load(SYSTEMS_DIR / "bicycle.yaml")
+    problem = eq.make_problem(model)
+    p = parameter_values(model)
+    names = [s.name for s in model.parameter_symbols]
+    read = dict(zip(names, problem._parameters_read))
+    assert not read["v"] and read["g"] and sum(read.values()) == len(names) - 1
+    z = np.random.default_rng(5).uniform(-0.3, 0.3, len(problem.unknowns))
+    for name in ("v", "g"):
+        e = np.eye(len(p))[names.index(name)]
+        h = 1e-6 * max(1.0, float(np.linalg.norm(p)))
+        difference = (problem.F(z, p + h * e) - problem.F(z, p - h * e)) / (2 * h)
+        assert np.array_equal(problem.Fp_along(z, p, e), difference)
+        assert np.any(difference) == (name == "g")

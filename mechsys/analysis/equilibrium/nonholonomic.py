@@ -476,12 +476,23 @@ class NonholonomicProblem(EquilibriumProblem):
         return np.column_stack([self.Fp_along(z, p, np.eye(len(p))[k]) for k in range(len(p))]) if len(p) else \
             np.zeros((self.pieces.size, 0))
 
+    @cached_property
+    def _parameters_read(self) -> np.ndarray:
+        """Which parameters the residual E reads: the arguments its generated code uses. A bicycle's speed only
+        sets the given rates, so dE/dv = 0 exactly and a speed sweep skips two evaluations per Jacobian."""
+        import ast
+
+        function = ast.parse(self.pieces._sources_text[1]).body[0]
+        used = {node.id for stmt in function.body for node in ast.walk(stmt) if isinstance(node, ast.Name)}
+        first = len(function.args.args) - len(self.model.parameter_symbols)
+        return np.array([f"a{first + k}" in used for k in range(len(self.model.parameter_symbols))], dtype=bool)
+
     def Fp_along(self, z: np.ndarray, p: np.ndarray, direction: np.ndarray) -> np.ndarray:
         """dF/dp . direction by a central difference (the parameters enter M, f and the constraints everywhere;
         exact derivatives would double the symbolic work for what only a continuation predictor uses)."""
         size = float(np.linalg.norm(direction))
-        if size == 0:
-            return np.zeros(self.pieces.size)
+        if size == 0 or not np.any(np.asarray(direction)[self._parameters_read]):
+            return np.zeros(self.pieces.size)  # what the difference gives: E does not read these parameters
         h = 1e-6 * max(1.0, float(np.linalg.norm(p))) / size
         return (self.F(z, p + h * direction) - self.F(z, p - h * direction)) / (2 * h)
 
