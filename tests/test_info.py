@@ -128,3 +128,27 @@ def test_a_second_info_reads_its_matrices_from_the_cache_and_says_the_same(name,
     monkeypatch.setattr(info, "matrix_source", no_code)
     second = asdict_info(system_info(mechsys.load(ROOT / "systems" / f"{name}.yaml")))
     assert first == second == uncached
+
+
+def test_the_autonomy_decision_is_remembered_and_equals_a_fresh_one(tmp_path, monkeypatch):
+    """MechanicalModel.is_autonomous scans the whole equations for t (half a second on the bicycle); the answer is
+    stored per structure and parameter values. Stored equals fresh for a model without t, one whose prescribed
+    constant spins leave t that cancels (the indicator: autonomous), and one excited by a given motion of its
+    base (not autonomous); another parameter value is decided again."""
+    import mechsys
+    from mechsys.mechanics.model import MechanicalModel
+    from tests.helpers import DATA_DIR, SYSTEMS_DIR
+
+    monkeypatch.setenv("MECHSYS_CACHE", str(tmp_path / "cache"))
+    decided = []
+    real = MechanicalModel._decide_autonomous
+    monkeypatch.setattr(MechanicalModel, "_decide_autonomous", lambda self, m: decided.append(m) or real(self, m))
+    cases = [(SYSTEMS_DIR / "centrifuge.yaml", True), (SYSTEMS_DIR / "indicator.yaml", True),
+             (DATA_DIR / "chain_base_excitation.yaml", False)]
+    for path, expected in cases:
+        before = len(decided)
+        assert mechsys.load(path).is_autonomous() is expected  # decided
+        assert mechsys.load(path).is_autonomous() is expected  # read back: a new model object, no decision
+        assert len(decided) == before + 1
+    mechsys.load(SYSTEMS_DIR / "indicator.yaml", {"Omega": 100}).is_autonomous()
+    assert len(decided) == 4

@@ -96,3 +96,21 @@ def cyclic_decision(model: MechanicalModel, decide):
     out = decide(model)
     cache.store(key, {"names": out.names, "basis": out.basis, "denied": out.denied})
     return out
+
+
+def autonomous_decision(model: MechanicalModel, method: str, decide) -> bool:
+    """``decide()`` (MechanicalModel.is_autonomous: whether t appears in M, f, A, b, a scan of the whole
+    equations), remembered on disk. It reads the structure and, where t appears, the parameter values (d/dt = 0
+    is checked numerically at them), so both are in the key."""
+    import json
+
+    from mechsys.numeric import cache
+
+    values = [[name, float(v)] for name, v in model.doc.parameter_values.items()]
+    key = cache.model_key(model, f"autonomous:{method}:" + json.dumps(values))
+    entry = cache.load(key)
+    if entry is not None and isinstance(entry.get("autonomous"), bool):
+        return entry["autonomous"]
+    out = bool(decide())
+    cache.store(key, {"autonomous": out})
+    return out

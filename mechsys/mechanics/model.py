@@ -353,7 +353,16 @@ class MechanicalModel:
 
     def is_autonomous(self, method: str = INTERNAL_METHOD) -> bool:
         """No explicit t in M, f, A, b. Decided symbolically when t is absent, else by d/dt = 0 at random states
-        (constant prescribed spins leave cos(W t)**2 + sin(W t)**2, which is never simplified on this path)."""
+        (constant prescribed spins leave cos(W t)**2 + sin(W t)**2, which is never simplified on this path).
+        Remembered per model object and on disk (mechanics/derivations.py)."""
+        memo = self.__dict__.setdefault("_autonomous", {})
+        if method not in memo:
+            from mechsys.mechanics import derivations
+
+            memo[method] = derivations.autonomous_decision(self, method, lambda: self._decide_autonomous(method))
+        return memo[method]
+
+    def _decide_autonomous(self, method: str) -> bool:
         eq = self.equations(method)
         parts = [m for m in (eq.M, eq.f, eq.A, eq.b) if m.shape[0] and self.t in sp.sympify(m).free_symbols]
         if not parts:
