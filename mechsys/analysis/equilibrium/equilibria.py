@@ -493,21 +493,19 @@ def solve_equilibria(problem: EquilibriumProblem, p: np.ndarray, search: dict | 
 
 
 def _disk_key(problem: EquilibriumProblem, key: tuple) -> str | None:
-    """The on-disk key of a search: the model's structure, names and code (cache.model_key), the search's own code,
-    the problem as posed (class, formulation, unknowns, split of a nonholonomic one), the starts' source (the
-    file's initial values and rates) and every number of the in-memory key; None when the cache is off."""
+    """The on-disk key of a search: the model's structure, names and code (cache.model_key: its code fingerprint
+    covers this module and nonholonomic.py, the search's own code), the problem as posed (class, formulation,
+    unknowns, split of a nonholonomic one), the starts' source (the file's initial values and rates) and every
+    number of the in-memory key; None when the cache is off."""
     import hashlib
     import json
-    from pathlib import Path
 
     from mechsys.numeric import cache
 
     if cache.cache_dir() is None:
         return None
     model = problem.model
-    here = Path(__file__).resolve().parent
-    code = hashlib.sha256(b"".join((here / f).read_bytes() for f in ("equilibria.py", "nonholonomic.py")))
-    payload = {"model": cache.model_key(model, "steady-search"), "code": code.hexdigest(),
+    payload = {"model": cache.model_key(model, "steady-search"),
                "problem": type(problem).__name__, "method": str(getattr(problem, "method", "")),
                "unknowns": [str(u) for u in problem.unknowns],
                "free": list(problem.free), "rates": list(problem.rate_unknowns),
