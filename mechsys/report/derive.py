@@ -7,7 +7,7 @@ from typing import Callable
 import sympy as sp
 
 from mechsys.mechanics.model import Equations
-from mechsys.report.printing import to_latex, to_text
+from mechsys.report.printing import shared_subexpressions, to_latex, to_text
 from mechsys.report.readable import readable
 
 FORMATS = ("text", "markdown", "latex", "json")
@@ -175,7 +175,13 @@ def to_json_dict(eq: Equations, name: str) -> dict:
 
 def render(eq: Equations, name: str, fmt: str, extra: dict | None = None, raw: bool = False) -> str:
     """The equations in a format. Text, Markdown and LaTeX print the readable form (report/readable.py: exact
-    clean-up within a time budget, a one-line note when it runs out) unless raw; JSON is always as derived."""
+    clean-up within a time budget, a one-line note when it runs out) unless raw; JSON is always as derived.
+    Subexpressions shared by the entries are printed once (report/printing.py)."""
+    with shared_subexpressions():
+        return _render(eq, name, fmt, extra, raw)
+
+
+def _render(eq: Equations, name: str, fmt: str, extra: dict | None, raw: bool) -> str:
     if fmt == "json":
         data = to_json_dict(eq, name)
         data.update(extra or {})
