@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Sequence
+from typing import Any, Callable, Sequence
 
 import sympy as sp
 
@@ -150,14 +150,16 @@ def _moved(v: sp.Matrix, a: sp.Matrix, w: sp.Matrix, al: sp.Matrix, d: sp.Matrix
 
 
 def time_derivative(expr: sp.Expr | sp.Matrix, coords: Sequence[sp.Symbol], rates: Sequence[sp.Symbol],
-                    t: sp.Symbol, accels: Sequence[sp.Symbol] | None = None) -> sp.Expr | sp.Matrix:
-    """Total time derivative by the chain rule over coordinates (and rates, when ``accels`` is given)."""
-    out = sp.diff(expr, t)
+                    t: sp.Symbol, accels: Sequence[sp.Symbol] | None = None,
+                    diff: Callable[[Any, sp.Symbol], Any] = sp.diff) -> sp.Expr | sp.Matrix:
+    """Total time derivative by the chain rule over coordinates (and rates, when ``accels`` is given); ``diff``
+    takes the partial derivatives (a model's memoized Differentiator, or sympy's diff)."""
+    out = diff(expr, t)
     for q, u in zip(coords, rates):
-        out = out + sp.diff(expr, q) * u
+        out = out + diff(expr, q) * u
     if accels is not None:
         for u, a in zip(rates, accels):
-            out = out + sp.diff(expr, u) * a
+            out = out + diff(expr, u) * a
     return out
 
 

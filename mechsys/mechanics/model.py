@@ -7,6 +7,7 @@ from functools import cached_property
 import sympy as sp
 
 from mechsys.mechanics.build import Body, Builder, Kinematics
+from mechsys.mechanics.differentiate import Differentiator
 from mechsys.mechanics.kinematics import FrameState, rate_coefficients, time_derivative
 from mechsys.model.load import T as TIME
 from mechsys.model.load import Document
@@ -148,7 +149,12 @@ class MechanicalModel:
         return dict(self.doc.prescribed)
 
     def dt(self, expr: sp.Expr | sp.Matrix, with_accels: bool = False) -> sp.Expr | sp.Matrix:
-        return time_derivative(expr, self.q, self.u, self.t, self.a if with_accels else None)
+        return time_derivative(expr, self.q, self.u, self.t, self.a if with_accels else None, self.diff)
+
+    @cached_property
+    def diff(self) -> Differentiator:
+        """d(expr)/d(symbol) as sympy gives it, each subexpression differentiated once per model."""
+        return Differentiator()
 
     def velocity(self, r: sp.Matrix) -> sp.Matrix:
         """Ground velocity of a point with ground position ``r(q, t)``, linear in the rates."""
@@ -256,7 +262,7 @@ class MechanicalModel:
             else:
                 V = self._elastic_potential(load.kind, load.data)
                 if V != 0:
-                    Qc.add(-sp.Matrix([sp.diff(V, q) for q in self.q]))
+                    Qc.add(-sp.Matrix([self.diff(V, q) for q in self.q]))
         return Qc.matrix()
 
     # ------------------------------------------------------------------------------------- constraints
@@ -308,17 +314,18 @@ class MechanicalModel:
         zero_rates = {u: 0 for u in self.u}
         M = sp.zeros(n, n)
         f = sp.zeros(n, 1)
-        p = [sp.diff(T, u) for u in self.u]
+        diff = self.diff
+        p = [diff(T, u) for u in self.u]
         for i in range(n):
             for j in range(i, n):
-                M[i, j] = M[j, i] = sp.diff(p[i], self.u[j])
+                M[i, j] = M[j, i] = diff(p[i], self.u[j])
         Mdot = sp.zeros(n, n)
         for i in range(n):
             for j in range(i, n):
                 Mdot[i, j] = Mdot[j, i] = self.dt(M[i, j])
         for i in range(n):
             b = p[i].xreplace(zero_rates)
-            f[i] = (Q[i] - sp.diff(V, self.q[i]) + sp.diff(T, self.q[i])
+            f[i] = (Q[i] - diff(V, self.q[i]) + diff(T, self.q[i])
                     - sum((Mdot[i, j] * self.u[j] for j in range(n)), sp.Integer(0)) - self.dt(b))
         return M, f
 

@@ -1,0 +1,76 @@
+"""Differentiation that visits each subexpression once: sympy's rules, memoized over the expression DAG.
+
+sympy's `diff` recurses through `Derivative.__new__` at every node, and each call walks the node's whole subtree
+again (its free symbols, then a `replace` of nested derivatives), so differentiating a derived expression costs
+the square of its size, and the entries of M, which share most of their subtrees, repeat all of it. This
+module applies the same rules as sympy (sums term by term, Leibniz's rule over a product's factors, sympy's
+formula for powers, the chain rule through `fdiff` for sin and cos, the same shortcut to zero for a node without
+the variable) and remembers each node's derivative, so the result is sympy's expression, built once. Nodes of
+other kinds are differentiated by sympy itself."""
+from __future__ import annotations
+
+import sympy as sp
+from sympy.core.function import ArgumentIndexError, Function
+
+_OWN_RULES = (sp.Add, sp.Mul, sp.Pow, sp.sin, sp.cos)
+
+
+class Differentiator:
+    """d(expr)/d(symbol), remembered per (node, symbol) for the lifetime of the object (one model)."""
+
+    def __init__(self) -> None:
+        self._free: dict[sp.Basic, frozenset] = {}
+        self._memo: dict[tuple[sp.Basic, sp.Symbol], sp.Expr] = {}
+
+    def free(self, expr: sp.Basic) -> frozenset:
+        """expr.free_symbols, remembered per node (sympy recomputes it at every call)."""
+        hit = self._free.get(expr)
+        if hit is None:
+            if expr.is_Symbol:
+                hit = frozenset((expr,))
+            elif type(expr) in _OWN_RULES:
+                hit = frozenset().union(*(self.free(a) for a in expr.args))
+            else:
+                hit = frozenset(expr.free_symbols)
+            self._free[expr] = hit
+        return hit
+
+    def __call__(self, expr: sp.Basic | sp.MatrixBase, x: sp.Symbol) -> sp.Basic:
+        """What sympy.diff(expr, x) gives (elementwise for a matrix)."""
+        if isinstance(expr, sp.MatrixBase):
+            return expr.applyfunc(lambda e: self(e, x))
+        expr = sp.sympify(expr)
+        key = (expr, x)
+        hit = self._memo.get(key)
+        if hit is None:
+            hit = self._derivative(expr, x)
+            self._memo[key] = hit
+        return hit
+
+    def _derivative(self, expr: sp.Basic, x: sp.Symbol) -> sp.Basic:
+        if x not in self.free(expr):
+            return sp.S.Zero  # Derivative.__new__'s quick exit
+        kind = type(expr)
+        if kind is sp.Add:
+            return sp.Add(*[self(a, x) for a in expr.args])
+        if kind is sp.Mul:
+            # Mul._eval_derivative_n_times for n = 1: one term per factor differentiated (Leibniz)
+            args = expr.args
+            return sp.Add(*[sp.Mul(*[self(a, x) if j == i else a for j, a in enumerate(args)])
+                            for i in range(len(args))])
+        if kind is sp.Pow:
+            base, exp = expr.args
+            dexp = self(exp, x)
+            log_part = dexp * sp.log(base) if dexp != 0 else sp.S.Zero
+            return expr * (log_part + self(base, x) * exp / base)
+        if kind in (sp.sin, sp.cos):
+            # Function._eval_derivative: fdiff times the argument's derivative
+            da = self(expr.args[0], x)
+            if da.is_zero:
+                return sp.Add()
+            try:
+                df = expr.fdiff(1)
+            except ArgumentIndexError:
+                df = Function.fdiff(expr, 1)
+            return sp.Add(df * da)
+        return sp.diff(expr, x)
