@@ -10,6 +10,7 @@ from typing import Callable, Sequence
 import sympy as sp
 from sympy.printing.pycode import PythonCodePrinter
 
+from mechsys.mechanics.differentiate import Differentiator
 from mechsys.numeric.runtime import StateFunction, function_from_source, matrix_from_source
 
 __all__ = ["generate_source", "compile_exprs", "matrix_source", "compile_matrix", "function_from_source",
@@ -95,13 +96,15 @@ def value_and_jacobian_program(exprs: Sequence[sp.Expr], args: Sequence[sp.Symbo
         needed.add(sym)
         todo += [s for s in values[sym].free_symbols if s in index and s not in needed]
 
+    diff = Differentiator()  # sympy's diff, each subexpression once
+
     def chain(value: sp.Expr) -> dict[int, sp.Expr]:
         out: dict[int, sp.Expr] = {}
         for s in value.free_symbols:
             ds = deriv.get(s)
             if not ds:
                 continue
-            partial = sp.diff(value, s)
+            partial = diff(value, s)
             if partial == 0:
                 continue
             for j, dsj in ds.items():
