@@ -7,6 +7,7 @@ from typing import Any
 import numpy as np
 import sympy as sp
 
+from mechsys.mechanics.differentiate import Differentiator
 from mechsys.mechanics.kinematics import AXES, FrameState, unit
 from mechsys.model.expressions import names_in
 from mechsys.model.load import T, Document
@@ -79,6 +80,7 @@ class Builder:
         self.doc = doc
         self.kin = Kinematics()
         self.used_by: dict[str, str] = {}
+        self.diff = Differentiator()  # the rates of the chain's angles and offsets share most subexpressions
 
     # ------------------------------------------------------------------------------------- helpers
     def axis(self, value: Any, path: Path) -> sp.Matrix:
@@ -179,9 +181,9 @@ class Builder:
         return self.doc.coords.get(name, self.doc.prescribed.get(name))
 
     def rate_of(self, expr: sp.Expr) -> sp.Expr:
-        out = sp.diff(expr, T)
+        out = self.diff(expr, T)
         for name, q in self.doc.coords.items():
-            out += sp.diff(expr, q) * self.doc.rates[name]
+            out += self.diff(expr, q) * self.doc.rates[name]
         return out
 
     # ------------------------------------------------------------------------------------- links
