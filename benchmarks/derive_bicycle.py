@@ -52,6 +52,22 @@ def sympy_baseline() -> float:
     return time.perf_counter() - t0
 
 
+def mechsys_work() -> float:
+    """Worker (cache off): seconds of load + Kane's equations + M and f compiled (CSE), after the imports: the
+    same work as the baseline's, without the process around it."""
+    os.environ["MECHSYS_CACHE"] = "off"
+    import mechsys
+    import mechsys.mechanics.model  # noqa: F401  (imported lazily by load; imports are not timed, as for sympy)
+    from mechsys.numeric.lambdify import compile_matrix
+
+    t0 = time.perf_counter()
+    model = mechsys.load(BIKE)
+    eq = model.equations("kane")
+    for matrix in (eq.M, eq.f):
+        compile_matrix(matrix, model.t, model.q, model.u, model.parameter_symbols)
+    return time.perf_counter() - t0
+
+
 def timed(argv: list[str], env: dict) -> tuple[float, int]:
     t0 = time.perf_counter()
     run = subprocess.run(argv, capture_output=True, text=True, env=env)
@@ -61,16 +77,23 @@ def timed(argv: list[str], env: dict) -> tuple[float, int]:
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--commands", nargs="*", default=list(COMMANDS), choices=list(COMMANDS))
-    ap.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
+    ap.add_argument("--worker", choices=["sympy", "mechsys"], help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.worker:
-        print(sympy_baseline())
+        print(sympy_baseline() if args.worker == "sympy" else mechsys_work())
         return 0
-    base_process, _ = timed([sys.executable, __file__, "--worker"], dict(os.environ))
-    base = float(subprocess.run([sys.executable, __file__, "--worker"], capture_output=True, text=True,
-                                check=True).stdout.strip().splitlines()[-1])
+    base_process, _ = timed([sys.executable, __file__, "--worker", "sympy"], dict(os.environ))
+
+    def work(kind: str) -> float:
+        return float(subprocess.run([sys.executable, __file__, "--worker", kind], capture_output=True, text=True,
+                                    check=True).stdout.strip().splitlines()[-1])
+
+    base = work("sympy")
+    own = work("mechsys")
     print(f"sympy KanesMethod + lambdify(cse), the same bicycle: {base:.2f} s of work "
-          f"({base_process:.2f} s as a process, imports included)\n")
+          f"({base_process:.2f} s as a process, imports included)")
+    print(f"mechsys load + Kane + M, f compiled (CSE), cache off: {own:.2f} s of work "
+          f"({own / base:.2f} of sympy's)\n")
     print(f"{'mechsys command':<16} {'cold [s]':>9} {'/ sympy':>8} {'cached [s]':>11} {'/ sympy':>8}  exit")
     failed = 0
     for name in args.commands:
