@@ -137,7 +137,8 @@ def code_fingerprint() -> str:
         # the analyses that generate code of their own define what their entries hold
         files += [root / "analysis" / name for name in ("motion/simulate.py", "motion/reactions.py",
                                                         "equilibrium/nonholonomic.py", "equilibrium/charts.py",
-                                                        "equilibrium/equilibria.py", "info.py")]
+                                                        "equilibrium/equilibria.py", "equilibrium/linearize.py",
+                                                        "info.py")]
         for f in files:
             digest.update(f.read_bytes())
         _FINGERPRINT = digest.hexdigest()[:16]

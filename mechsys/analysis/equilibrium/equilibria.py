@@ -11,7 +11,9 @@ import sympy as sp
 
 from mechsys.errors import AnalysisError, InputError
 from mechsys.mechanics.model import MechanicalModel
-from mechsys.numeric.lambdify import compile_exprs
+from mechsys.numeric import cache
+from mechsys.numeric.lambdify import compile_exprs, generate_source
+from mechsys.numeric.runtime import function_from_source
 from mechsys.numeric.parameters import parameter_values
 
 if TYPE_CHECKING:
@@ -127,6 +129,8 @@ class EquilibriumProblem:
     def _family_rates(self) -> dict[str, float]:
         """Cyclic rates whose equation vanishes identically at rest (e.g. a free rotor): fixed at the initial rate."""
         fixed = {}
+        if not self.cyclic:
+            return fixed
         F = self.eq.f.xreplace(self.rest_substitution)
         rng = np.random.default_rng(2)
         syms = sorted(F.free_symbols - set(self.model.parameter_symbols), key=str)
@@ -188,33 +192,48 @@ class EquilibriumProblem:
     def _args(self) -> list[sp.Symbol]:
         return self.unknowns + [self._u(c) for c in self.fixed_rates] + list(self.model.parameter_symbols)
 
-    def _memo(self, what: str, build):
-        """Compiled functions are kept on the model (shared by with_overrides copies): a sweep compiles once."""
+    def _memo(self, what: str, exprs):
+        """The compiled function of the expressions ``exprs()`` returns, kept on the model (shared by with_overrides
+        copies: a sweep compiles once) and its generated code cached on disk, keyed by the model's structure
+        (cache.model_key: names, decisions, code) and the problem's split into free and cyclic coordinates,
+        steady-rate unknowns and given rates (decided with parameter values), so a second command on the model
+        differentiates and compiles nothing."""
         store = self.model.__dict__.setdefault("_equilibrium_memo", {})
         key = (what, tuple(self.rate_unknowns), tuple(self.fixed_rates))
         if key not in store:
-            store[key] = build()
+            disk = _source_key(self, what)
+            entry = cache.load(disk) if disk is not None else None
+            source = entry.get("source") if entry is not None else None
+            if not isinstance(source, str):
+                source = generate_source(list(exprs()), self._args)
+                if disk is not None:
+                    cache.store(disk, {"source": source})
+            store[key] = function_from_source(source)
         return store[key]
+
+    def _jacobian(self, wrt: list) -> sp.Matrix:
+        """d(residual_exprs)/d(wrt) by the model's memoized differentiation (sympy's expressions)."""
+        rows = self.residual_exprs
+        return sp.Matrix(rows.shape[0], len(wrt), lambda i, j: self.model.diff(rows[i], wrt[j]))
 
     @cached_property
     def _F(self):
-        return self._memo("F", lambda: compile_exprs(list(self.residual_exprs), self._args))
+        return self._memo("F", lambda: self.residual_exprs)
 
     @cached_property
     def _J(self):
-        return self._memo("J", lambda: compile_exprs(list(self.residual_exprs.jacobian(self.unknowns)), self._args))
+        return self._memo("J", lambda: self._jacobian(self.unknowns))
 
     def _dF_dp_exprs(self) -> sp.Matrix:
-        return self.residual_exprs.jacobian(self.model.parameter_symbols)
+        return self._jacobian(self.model.parameter_symbols)
 
     @cached_property
     def _Fp(self):
-        return self._memo("Fp", lambda: compile_exprs(list(self._dF_dp_exprs()), self._args))
+        return self._memo("Fp", self._dF_dp_exprs)
 
     @cached_property
     def _Fr(self):
-        rates = [self._u(c) for c in self.fixed_rates]
-        return self._memo("Fr", lambda: compile_exprs(list(self.residual_exprs.jacobian(rates)), self._args))
+        return self._memo("Fr", lambda: self._jacobian([self._u(c) for c in self.fixed_rates]))
 
     # ------------------------------------------------------------------------------------- numerics
     def extra(self) -> list[float]:
@@ -277,6 +296,18 @@ class EquilibriumProblem:
     def state(self, e: Equilibrium) -> np.ndarray:
         return np.array([e.coordinates[c] for c in self.free] + [e.rates[c] for c in self.rate_unknowns]
                         + list(e.multipliers), dtype=float)
+
+
+def _source_key(problem: EquilibriumProblem, what: str) -> str | None:
+    """The cache key of a holonomic problem's generated function ``what`` (None when the cache is off)."""
+    if cache.cache_dir() is None:
+        return None
+    import hashlib
+    import json
+
+    split = [problem.free, problem.cyclic, problem.rate_unknowns, list(problem.fixed_rates), problem.m]
+    payload = json.dumps([cache.model_key(problem.model, f"equilibrium-{what}"), split])
+    return hashlib.sha256(payload.encode()).hexdigest()[:32]
 
 
 # ----------------------------------------------------------------------------------------- solving

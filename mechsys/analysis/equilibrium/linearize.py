@@ -8,34 +8,65 @@ import numpy as np
 import sympy as sp
 
 from mechsys.mechanics.model import MechanicalModel
-from mechsys.numeric.lambdify import compile_exprs
+from mechsys.numeric import cache
+from mechsys.numeric.lambdify import generate_source
+from mechsys.numeric.runtime import function_from_source
 
 
 class LinearPieces:
     """Compiled M, df/dq, df/du, the constraint Jacobian and d(A^T lambda)/dq of a model (t = 0), evaluated at
-    a state (q, u, lambda) for a parameter vector."""
+    a state (q, u, lambda) for a parameter vector. The generated code is cached on disk, keyed by the model's
+    structure (parameters stay symbols), so a second command on the model derives no Jacobian and runs no CSE."""
+
+    KEYS = ("M", "dfdq", "dfdu", "A")
 
     def __init__(self, model: MechanicalModel) -> None:
         self.model = model
-        eq = model.equations("lagrange")
         self.n = len(model.q)
-        self.m = eq.A.shape[0]
+        self.m = len(model.kin.constraints)
         self.lam = list(sp.symbols(f"lambda1:{self.m + 1}", real=True)) if self.m else []
+        args = [*model.q, *model.u, *self.lam, *model.parameter_symbols]
+        key = cache.model_key(model, "linear-pieces")
+        entry = cache.load(key)
+        if not self._usable(entry):
+            exprs = []
+            layout = {}
+            for name in self.KEYS:
+                mat = self.symbolic[name]
+                layout[name] = [len(exprs), list(mat.shape)]
+                exprs += list(mat)
+            entry = {"layout": layout, "source": generate_source(exprs, args)}
+            cache.store(key, entry)
+        self.layout = {name: (int(start), tuple(shape)) for name, (start, shape) in entry["layout"].items()}
+        self._fn = function_from_source(entry["source"])
+
+    def _usable(self, entry: dict | None) -> bool:
+        """A stored entry whose layout is this model's (every block in order, with its shape)."""
+        n, m = self.n, self.m
+        shapes = {"M": [n, n], "dfdq": [n, n], "dfdu": [n, n], "A": [m, n]}
+        try:
+            layout, start = entry["layout"], 0
+            for name in self.KEYS:
+                if layout[name] != [start, shapes[name]]:
+                    return False
+                start += shapes[name][0] * shapes[name][1]
+            return list(layout) == list(self.KEYS) and isinstance(entry["source"], str)
+        except (TypeError, KeyError):
+            return False
+
+    @cached_property
+    def symbolic(self) -> dict[str, sp.Matrix]:
+        """The symbolic blocks at t = 0 (Jacobians by the model's memoized differentiation: sympy's expressions)."""
+        model = self.model
+        eq = model.equations("lagrange")
         t0 = {model.t: 0}
         force = eq.f + (eq.A.T * sp.Matrix(self.lam) if self.m else sp.zeros(self.n, 1))
-        self.symbolic = {
-            "M": eq.M.xreplace(t0),
-            "dfdq": force.jacobian(model.q).xreplace(t0),
-            "dfdu": eq.f.jacobian(model.u).xreplace(t0),
-            "A": eq.A.xreplace(t0),
-        }
-        args = [*model.q, *model.u, *self.lam, *model.parameter_symbols]
-        exprs = []
-        self.layout = {}
-        for key, mat in self.symbolic.items():
-            self.layout[key] = (len(exprs), mat.shape)
-            exprs += list(mat)
-        self._fn = compile_exprs(exprs, args)
+
+        def jacobian(rows: sp.Matrix, wrt: list) -> sp.Matrix:
+            return sp.Matrix(rows.shape[0], len(wrt), lambda i, j: model.diff(rows[i], wrt[j]))
+
+        return {"M": eq.M.xreplace(t0), "dfdq": jacobian(force, model.q).xreplace(t0),
+                "dfdu": jacobian(eq.f, model.u).xreplace(t0), "A": eq.A.xreplace(t0)}
 
     def evaluate(self, q: np.ndarray, u: np.ndarray, lam: np.ndarray, p: np.ndarray) -> dict[str, np.ndarray]:
         out = np.asarray(self._fn(*q, *u, *lam, *p), dtype=float)

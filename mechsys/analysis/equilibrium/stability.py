@@ -312,7 +312,12 @@ def _effective_potential(problem, e) -> tuple[sp.Expr, list[sp.Symbol]]:
 
 
 def _hessian(U: sp.Expr, qn: list, problem, q0: np.ndarray, p: np.ndarray) -> np.ndarray:
-    H = sp.hessian(U, qn)
+    diff = problem.model.diff  # sympy.hessian's entries (upper triangle, mirrored), each subexpression once
+    n = len(qn)
+    H = sp.zeros(n, n)
+    for i in range(n):
+        for j in range(i, n):
+            H[i, j] = H[j, i] = diff(diff(U, qn[i]), qn[j])
     fn = compile_exprs(list(H), qn + list(problem.model.parameter_symbols))
     return np.array(fn(*q0, *p), dtype=float).reshape(len(qn), len(qn))
 

@@ -1,0 +1,85 @@
+"""The generated code of the holonomic equilibrium analysis is cached like the equations (issue 13): the rest
+equations, their Jacobians (unknowns, parameters, given rates) and the linearization's blocks. Code read back
+equals code generated afresh, evaluates bit for bit the same, needs no differentiation, and is keyed by the
+model's structure and the problem's split; an entry that does not fit the model is ignored."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import mechsys
+from helpers import SYSTEMS_DIR
+from mechsys.analysis.equilibrium import equilibria as eqm
+from mechsys.analysis.equilibrium.linearize import LinearPieces
+from mechsys.numeric import cache
+from mechsys.numeric.parameters import parameter_values
+
+MODELS = ["gyrostabilizer", "four_bar", "centrifuge", "double_pendulum"]
+
+
+@pytest.fixture
+def cache_dir(tmp_path, monkeypatch):
+    folder = tmp_path / "cache"
+    monkeypatch.setenv("MECHSYS_CACHE", str(folder))
+    return folder
+
+
+def _evaluations(model, rng, forbid_diff: bool = False):
+    """F, J, dF/dp, dF/d(given rates) and the linearization's blocks at random points (forbid_diff: fail if the
+    model differentiates anything)."""
+    if forbid_diff:
+        model.__dict__["diff"] = lambda *a: pytest.fail("differentiated with the code cached")
+    problem = eqm.make_problem(model)
+    pieces = LinearPieces(model)
+    p = parameter_values(model)
+    out = []
+    for _ in range(3):
+        z = rng.uniform(-1.5, 1.5, len(problem.unknowns))
+        out += [problem.F(z, p), problem.J(z, p), problem.Fp(z, p), problem.Fr(z, p)]
+        n = len(model.q)
+        blocks = pieces.evaluate(rng.uniform(-1, 1, n), rng.uniform(-1, 1, n), rng.uniform(-1, 1, pieces.m), p)
+        out += [blocks[k] for k in LinearPieces.KEYS]
+    return out
+
+
+@pytest.mark.parametrize("name", MODELS)
+def test_cached_code_equals_fresh_code_without_differentiating(name, cache_dir, monkeypatch):
+    path = SYSTEMS_DIR / f"{name}.yaml"
+    fresh = _evaluations(mechsys.load(path), np.random.default_rng(3))
+    assert any(cache_dir.glob("*.json"))
+    cached = _evaluations(mechsys.load(path), np.random.default_rng(3), forbid_diff=True)
+    assert len(fresh) == len(cached)
+    for a, b in zip(fresh, cached):
+        np.testing.assert_array_equal(a, b)
+    monkeypatch.setenv("MECHSYS_CACHE", "off")
+    for a, b in zip(fresh, _evaluations(mechsys.load(path), np.random.default_rng(3))):
+        np.testing.assert_array_equal(a, b)
+
+
+def test_the_key_covers_the_split_of_the_problem(cache_dir):
+    model = mechsys.load(SYSTEMS_DIR / "gyrostabilizer.yaml")
+    problem = eqm.make_problem(model)
+    key = eqm._source_key(problem, "F")
+    assert key != eqm._source_key(problem, "J")
+    for change in (lambda pr: pr.rate_unknowns.append("x"), lambda pr: pr.fixed_rates.update({"x": 1.0}),
+                   lambda pr: pr.free.pop()):
+        other = eqm.make_problem(model)
+        change(other)
+        assert eqm._source_key(other, "F") != key
+
+
+def test_an_entry_that_does_not_fit_is_ignored(cache_dir):
+    path = SYSTEMS_DIR / "four_bar.yaml"
+    model = mechsys.load(path)
+    key = cache.model_key(model, "linear-pieces")
+    reference = LinearPieces(model)
+    entry = cache.load(key)
+    n = len(model.q)
+    entry["layout"]["M"] = [0, [n - 1, n]]  # a block of another shape
+    cache.store(key, entry)
+    again = LinearPieces(mechsys.load(path))
+    p = parameter_values(model)
+    q, u, lam = np.full(n, 0.3), np.full(n, -0.2), np.full(again.m, 0.5)
+    for k in LinearPieces.KEYS:
+        np.testing.assert_array_equal(again.evaluate(q, u, lam, p)[k], reference.evaluate(q, u, lam, p)[k])
+    assert cache.load(key)["layout"]["M"] == [0, [n, n]]  # stored again, as generated
