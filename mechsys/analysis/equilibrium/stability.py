@@ -314,7 +314,7 @@ def _effective_potential(problem, e) -> tuple[sp.Expr, list[sp.Symbol]]:
 def _hessian(U: sp.Expr, qn: list, problem, q0: np.ndarray, p: np.ndarray) -> np.ndarray:
     diff = problem.model.diff  # sympy.hessian's entries (upper triangle, mirrored), each subexpression once
     n = len(qn)
-    H = sp.zeros(n, n)
+    H = sp.zeros(n, n) if n else sp.hessian(U, qn)  # sympy refuses an empty list of variables: so do we
     for i in range(n):
         for j in range(i, n):
             H[i, j] = H[j, i] = diff(diff(U, qn[i]), qn[j])
