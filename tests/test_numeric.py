@@ -49,3 +49,22 @@ def test_forward_jacobian_of_abs_and_of_an_input_named_like_a_temporary():
         out = fn(*point)
         want = [float(e.subs({q: point[0], x4: point[1]})) for e in jac]
         assert out[2:] == pytest.approx(want, rel=1e-12, abs=1e-12)
+
+
+def test_a_remembered_source_is_the_source_generated_afresh_for_the_same_expressions_and_arguments():
+    """generate_source remembers its latest results (one command compiles M for the cyclic test and for info):
+    the key is the expressions and the arguments in order, and a hit is what generation gives."""
+    import sympy as sp
+
+    from mechsys.numeric import lambdify as L
+
+    x, y, a = sp.symbols("x y a")
+    exprs = [sp.sin(x) * a + y**2, sp.cos(x - y) * sp.sin(x) * a]
+    first = L.generate_source(exprs, [x, y, a])
+    assert L.generate_source(list(exprs), [x, y, a]) == first == L._generate_source(exprs, [x, y, a])
+    swapped = L.generate_source(exprs, [y, x, a])
+    assert swapped != first and swapped == L._generate_source(exprs, [y, x, a])
+    assert L.function_from_source(swapped)(2.0, 1.0, 3.0) == L.function_from_source(first)(1.0, 2.0, 3.0)
+    for k in range(L._RECENT_SIZE + 1):  # bounded: the oldest is forgotten
+        L.generate_source([x + k], [x])
+    assert len(L._RECENT) == L._RECENT_SIZE and (tuple(exprs), (x, y, a)) not in L._RECENT

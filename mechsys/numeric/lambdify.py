@@ -4,6 +4,7 @@ sympy.lambdify walks the whole (unshared) expression tree several times to find 
 dominates for the long expressions of a chain; here CSE runs once and only its small results are printed."""
 from __future__ import annotations
 
+from collections import OrderedDict
 from dataclasses import dataclass
 from typing import Callable, Sequence
 
@@ -35,10 +36,26 @@ class _Printer(PythonCodePrinter):
         return "0.0"
 
 
+#: The latest generated sources by (expressions, arguments): one command may compile the same matrix twice (the
+#: cyclic test's shifted M and A, then `info`'s), and CSE is the costly part. The source is a function of the key.
+_RECENT: OrderedDict[tuple, str] = OrderedDict()
+_RECENT_SIZE = 16
+
+
 def generate_source(exprs: Sequence[sp.Expr], args: Sequence[sp.Symbol]) -> str:
     """Python source of ``_f(a0, a1, ...)`` returning ``exprs`` (shared subexpressions computed once)."""
-    names = {a: f"a{i}" for i, a in enumerate(args)}
     exprs = [sp.sympify(e) for e in exprs]
+    key = (tuple(exprs), tuple(args))
+    source = _RECENT.get(key)
+    if source is None:
+        source = _RECENT[key] = _generate_source(exprs, args)
+        if len(_RECENT) > _RECENT_SIZE:
+            _RECENT.popitem(last=False)
+    return source
+
+
+def _generate_source(exprs: list[sp.Expr], args: Sequence[sp.Symbol]) -> str:
+    names = {a: f"a{i}" for i, a in enumerate(args)}
     replacements, reduced = sp.cse(exprs, order="none")
     for k, (sym, _) in enumerate(replacements):
         names[sym] = f"x{k}"
