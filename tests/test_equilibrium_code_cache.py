@@ -83,3 +83,18 @@ def test_an_entry_that_does_not_fit_is_ignored(cache_dir):
     for k in LinearPieces.KEYS:
         np.testing.assert_array_equal(again.evaluate(q, u, lam, p)[k], reference.evaluate(q, u, lam, p)[k])
     assert cache.load(key)["layout"]["M"] == [0, [n, n]]  # stored again, as generated
+
+
+@pytest.mark.parametrize("stored", [{"source": 42}, {"other": "x"},
+                                    {"source": "import os\ndef _f(a0):\n    return [os.getpid()]"}])
+def test_a_stored_rest_equation_that_is_not_generated_code_is_ignored(stored, cache_dir):
+    path = SYSTEMS_DIR / "gyrostabilizer.yaml"
+    model = mechsys.load(path)
+    problem = eqm.make_problem(model)
+    p = parameter_values(model)
+    z = np.full(len(problem.unknowns), 0.4)
+    reference = problem.F(z, p)
+    cache.store(eqm._source_key(problem, "F"), stored)
+    again = eqm.make_problem(mechsys.load(path))
+    np.testing.assert_array_equal(again.F(z, p), reference)
+    assert isinstance(cache.load(eqm._source_key(again, "F"))["source"], str)  # generated and stored again

@@ -203,12 +203,13 @@ class EquilibriumProblem:
         if key not in store:
             disk = _source_key(self, what)
             entry = cache.load(disk) if disk is not None else None
-            source = entry.get("source") if entry is not None else None
-            if not isinstance(source, str):
+            try:
+                store[key] = function_from_source(entry["source"])
+            except (TypeError, KeyError, ValueError, SyntaxError):  # none stored, or not what this code writes
                 source = generate_source(list(exprs()), self._args)
                 if disk is not None:
                     cache.store(disk, {"source": source})
-            store[key] = function_from_source(source)
+                store[key] = function_from_source(source)
         return store[key]
 
     def _jacobian(self, wrt: list) -> sp.Matrix:
