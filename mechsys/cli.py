@@ -217,7 +217,7 @@ def derive(
                               "max_relative_difference": result.max_rel_diff, "symbolic": result.symbolic}
         if simplify:
             eq = simplified(eq)
-        text = render(eq, model.name, fmt.value, extra, raw=raw)
+        text = render(eq, model.name, fmt.value, extra, raw=raw, model=None if simplify else model)
         if verdict is not None and fmt.value != "json":
             prefix = "% " if fmt.value == "latex" else ""
             text += f"{prefix}check: {verdict.summary()}\n"

@@ -230,11 +230,13 @@ def test_a_budget_spent_midway_leaves_the_rest_as_derived():
     assert 0 in seen and len(printed) in seen and len(seen) > 3
 
 
-def test_a_budget_spent_before_the_norms_keeps_identities_and_signs(monkeypatch):
+def test_a_budget_spent_before_the_norms_keeps_identities_and_signs(monkeypatch, tmp_path):
     def out_of_time(self, add):
         raise rd.OutOfTime
 
     monkeypatch.setattr(rd._Cleaner, "_norms", out_of_time)
+    # a private cache: the clean-up `derive` stores is keyed by this module's source, which the patch leaves as is
+    monkeypatch.setenv("MECHSYS_CACHE", str(tmp_path / "cache"))
     raw = load_system("rolling_disk").equations("lagrange")
     cleanup = rd.readable(raw)
     n = sum(1 for e in entries(raw) if e.args)
@@ -324,3 +326,40 @@ def test_printed_mass_matrix_of_a_user_model_is_the_closed_form(name, tmp_path: 
         entry = closed[i, i]
         coeff = f"({to_text(entry)})" if entry.is_Add else to_text(entry)
         assert f"{coeff}*der(der({c}))" in text
+
+
+# ------------------------------------------------------------------------ the clean-up kept in the cache
+@pytest.mark.parametrize("name", ["gyrostabilizer", "rolling_disk", "slider_crank"])
+def test_a_stored_clean_up_prints_what_a_fresh_one_prints_without_cleaning_again(name, tmp_path, monkeypatch):
+    from mechsys.report.derive import render
+
+    path = SYSTEMS_DIR / f"{name}.yaml"
+    monkeypatch.setenv("MECHSYS_CACHE", "off")
+    fresh = {(method, fmt): render(mechsys.load(path).equations(method), name, fmt)
+             for method in ("lagrange", "kane") for fmt in ("text", "latex")}
+    monkeypatch.setenv("MECHSYS_CACHE", str(tmp_path / "cache"))
+    for round_ in range(2):
+        if round_:
+            monkeypatch.setattr(rd, "readable", lambda *a, **k: pytest.fail("cleaned up again"))
+        for (method, fmt), text in fresh.items():
+            model = mechsys.load(path)
+            assert render(model.equations(method), name, fmt, model=model) == text
+
+
+def test_a_stored_clean_up_that_does_not_fit_is_ignored_and_the_budget_is_in_the_key(tmp_path, monkeypatch):
+    from mechsys.numeric import cache
+
+    monkeypatch.setenv("MECHSYS_CACHE", str(tmp_path / "cache"))
+    model = load_system("gyrostabilizer")
+    eq = model.equations("lagrange")
+    first = rd.stored_readable(model, eq)
+    assert rd.stored_readable(model, eq, budget=10).left_as_derived > 0  # another budget: cleaned anew
+    damaged = 0
+    for entry in tmp_path.joinpath("cache").glob("*.json"):
+        data = cache.load(entry.stem)
+        if data is not None and "counts" in data:
+            cache.store(entry.stem, {**data, "counts": [1, 2]})  # damaged: the clean-up runs again
+            damaged += 1
+    assert damaged == 2  # the default budget's entry and budget 10's
+    again = rd.stored_readable(load_system("gyrostabilizer"), eq)
+    assert entries(again.equations) == entries(first.equations) and again.entries == first.entries

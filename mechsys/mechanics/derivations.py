@@ -21,16 +21,17 @@ if TYPE_CHECKING:
 PARTS = ("M", "f", "Q", "A", "b")  # matrices; then T and V
 
 
-def _symbols(model: MechanicalModel) -> dict[str, sp.Symbol]:
+def model_symbols(model: MechanicalModel) -> dict[str, sp.Symbol]:
+    """The model's symbols by name (what stored expressions may name); empty on a name clash (then no cache)."""
     out = {s.name: s for s in (model.t, *model.q, *model.u, *model.a, *model.parameter_symbols)}
-    return out if len(out) == 3 * len(model.q) + 1 + len(model.parameter_symbols) else {}  # a name clash: no cache
+    return out if len(out) == 3 * len(model.q) + 1 + len(model.parameter_symbols) else {}
 
 
 def store(model: MechanicalModel, eq: Equations) -> None:
     """Write ``eq`` (a no-op when the cache is off or the expressions leave the whitelist)."""
     from mechsys.numeric import cache
 
-    symbols = _symbols(model)
+    symbols = model_symbols(model)
     mats = [sp.Matrix(getattr(eq, k)) for k in PARTS]
     try:
         data = serialize.dump([e for m in mats for e in m] + [eq.T, eq.V], symbols) if symbols else None
@@ -47,7 +48,7 @@ def load(model: MechanicalModel, method: str) -> Equations | None:
     from mechsys.mechanics.model import Equations
     from mechsys.numeric import cache
 
-    symbols = _symbols(model)
+    symbols = model_symbols(model)
     entry = cache.load(cache.model_key(model, f"equations:{method}")) if symbols else None
     if entry is None:
         return None

@@ -8,7 +8,7 @@ import sympy as sp
 
 from mechsys.mechanics.model import Equations
 from mechsys.report.printing import shared_subexpressions, to_latex, to_text
-from mechsys.report.readable import readable
+from mechsys.report.readable import readable, stored_readable
 
 FORMATS = ("text", "markdown", "latex", "json")
 
@@ -173,15 +173,16 @@ def to_json_dict(eq: Equations, name: str) -> dict:
     return data
 
 
-def render(eq: Equations, name: str, fmt: str, extra: dict | None = None, raw: bool = False) -> str:
+def render(eq: Equations, name: str, fmt: str, extra: dict | None = None, raw: bool = False, model=None) -> str:
     """The equations in a format. Text, Markdown and LaTeX print the readable form (report/readable.py: exact
     clean-up within a time budget, a one-line note when it runs out) unless raw; JSON is always as derived.
-    Subexpressions shared by the entries are printed once (report/printing.py)."""
+    ``model``: the model whose own derived equations ``eq`` are (not simplified), so the clean-up is read from
+    and kept in the derivation cache. Subexpressions shared by the entries are printed once (report/printing.py)."""
     with shared_subexpressions():
-        return _render(eq, name, fmt, extra, raw)
+        return _render(eq, name, fmt, extra, raw, model)
 
 
-def _render(eq: Equations, name: str, fmt: str, extra: dict | None, raw: bool) -> str:
+def _render(eq: Equations, name: str, fmt: str, extra: dict | None, raw: bool, model) -> str:
     if fmt == "json":
         data = to_json_dict(eq, name)
         data.update(extra or {})
@@ -189,7 +190,7 @@ def _render(eq: Equations, name: str, fmt: str, extra: dict | None, raw: bool) -
     renderer = {"text": render_text, "markdown": render_markdown, "latex": render_latex}[fmt]
     if raw:
         return renderer(eq, name)
-    cleanup = readable(eq)
+    cleanup = readable(eq) if model is None else stored_readable(model, eq)
     text = renderer(cleanup.equations, name, tidy=True)
     note = cleanup.note()
     if note:

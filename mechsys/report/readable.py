@@ -441,3 +441,47 @@ def readable(eq: Equations, budget: int | None = None) -> Cleanup:
 def clean_expression(expr: sp.Expr, budget: int | None = None) -> sp.Expr:
     """One expression cleaned up as `readable` does, in one pass (OutOfTime when the budget runs out)."""
     return _Cleaner(_Work(BUDGET_VISITS if budget is None else budget)).clean(sp.sympify(expr))
+
+
+def stored_readable(model, eq: Equations, budget: int | None = None) -> Cleanup:
+    """readable(eq) for ``model``'s own derived equations, kept in the derivation cache as data (the cleaned
+    expressions through mechanics/serialize.py's whitelist, and the budget's counts), so a second `derive` of the
+    model prints without cleaning up again. The key is the model's (cache.model_key: structure, names, decisions,
+    code), the formulation, the budget and this module's source; a stored entry that does not fit the equations'
+    shapes is ignored."""
+    import hashlib
+    from pathlib import Path
+
+    from mechsys.mechanics import derivations, serialize
+    from mechsys.numeric import cache
+
+    budget = BUDGET_VISITS if budget is None else budget
+    symbols = derivations.model_symbols(model)
+    if cache.cache_dir() is None or not symbols:
+        return readable(eq, budget)
+    digest = hashlib.sha256(Path(__file__).read_bytes()).hexdigest()[:16]
+    key = cache.model_key(model, f"readable:{eq.method}:{budget}:{digest}")
+    names = ("M", "f", "Q", "A", "b")
+    entry = cache.load(key)
+    if entry is not None:
+        exprs = serialize.load(entry.get("expressions"), symbols)
+        counts = entry.get("counts")
+        size = sum(len(getattr(eq, k)) for k in names) + 2
+        if exprs is not None and len(exprs) == size and isinstance(counts, list) and len(counts) == 4 \
+                and all(isinstance(c, int) for c in counts):
+            mats, k = {}, 0
+            for name in names:
+                shape = getattr(eq, name).shape
+                mats[name] = sp.Matrix(*shape, exprs[k:k + shape[0] * shape[1]])
+                k += shape[0] * shape[1]
+            return Cleanup(replace(eq, T=exprs[-2], V=exprs[-1], **mats), counts[0], counts[1], counts[2], budget,
+                           counts[3])
+    cleanup = readable(eq, budget)
+    out = cleanup.equations
+    try:
+        data = serialize.dump([e for k in names for e in getattr(out, k)] + [out.T, out.V], symbols)
+    except serialize.Unsupported:
+        return cleanup
+    cache.store(key, {"expressions": data, "counts": [cleanup.entries, cleanup.left_as_derived,
+                                                      cleanup.partly_cleaned, cleanup.spent]})
+    return cleanup
