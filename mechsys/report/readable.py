@@ -461,7 +461,7 @@ def stored_readable(model, eq: Equations, budget: int | None = None) -> Cleanup:
         return readable(eq, budget)
     digest = hashlib.sha256(Path(__file__).read_bytes()).hexdigest()[:16]
     key = cache.model_key(model, f"readable:{eq.method}:{budget}:{digest}")
-    names = ("M", "f", "Q", "A", "b")
+    names = derivations.PARTS
     entry = cache.load(key)
     if entry is not None:
         exprs = serialize.load(entry.get("expressions"), symbols)
