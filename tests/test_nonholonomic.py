@@ -289,3 +289,36 @@ def test_a_parameter_the_residual_does_not_read_has_an_exact_zero_derivative():
         difference = (problem.F(z, p + h * e) - problem.F(z, p - h * e)) / (2 * h)
         assert np.array_equal(problem.Fp_along(z, p, e), difference)
         assert np.any(difference) == (name == "g")
+
+
+def test_with_a_compiler_the_pieces_store_no_python_and_make_it_when_asked(tmp_path, monkeypatch):
+    """A C compiler builds the stored C form, so the entry holds no Python sources (their CSE and printing were
+    a sixth of a cold bicycle command); the Python functions are made when asked, agree with the library, and
+    read the parameters the stored flags say (checked against the names the generated code uses)."""
+    import ast
+
+    import mechsys
+    from mechsys.analysis.equilibrium.nonholonomic import ConstrainedPieces
+    from mechsys.numeric import cache
+    from mechsys.numeric.native import compiler
+
+    if compiler() is None:
+        pytest.skip("no C compiler")
+    monkeypatch.setenv("MECHSYS_CACHE", str(tmp_path))
+    model = mechsys.load(WHEEL)
+    pieces = ConstrainedPieces(model, "kane")
+    entry = cache.load(cache.model_key(model, "constrained-pieces-kane"))
+    assert entry["source"] is None and entry["values"] is None and isinstance(entry["c"], str)
+    assert pieces._native is not None
+    function = ast.parse(pieces._python_text()[1]).body[0]  # made now
+    used = {node.id for stmt in function.body for node in ast.walk(stmt) if isinstance(node, ast.Name)}
+    first = len(function.args.args) - len(model.parameter_symbols)
+    assert list(pieces.read) == [f"a{first + k}" in used for k in range(len(model.parameter_symbols))]
+    rng = np.random.default_rng(2)
+    p = np.array(list(model.parameters.values()))
+    for _ in range(3):
+        args = np.concatenate([rng.normal(size=5), rng.normal(size=5), rng.normal(size=5), rng.normal(size=2), p])
+        np.testing.assert_allclose(pieces._native("mechsys_full", args), np.asarray(pieces._fn(*args), dtype=float),
+                                   rtol=1e-13, atol=1e-13)
+        np.testing.assert_allclose(pieces._native("mechsys_values", args),
+                                   np.asarray(pieces._values(*args), dtype=float), rtol=1e-13, atol=1e-13)

@@ -33,7 +33,7 @@ from mechsys.numeric.parameters import parameter_values
 from mechsys.errors import AnalysisError, InputError
 from mechsys.mechanics.model import MechanicalModel
 from mechsys.numeric import native
-from mechsys.numeric.lambdify import (compile_exprs, function_from_source, generate_source,
+from mechsys.numeric.lambdify import (ForwardProgram, compile_exprs, function_from_source, generate_source,
                                        value_and_jacobian_program, value_and_jacobian_sources)
 
 #: relative size below which a column, a singular value or a shift difference counts as zero
@@ -62,35 +62,53 @@ class ConstrainedPieces:
         self._outputs = self.size + n * n + self.m * n
         key = cache.model_key(model, f"constrained-pieces-{method}")
         entry = cache.load(key)
-        if not (isinstance(entry, dict) and entry.get("size") == self.size and isinstance(entry.get("source"), str)
-                and isinstance(entry.get("values"), str) and isinstance(entry.get("autonomous"), bool)
-                and "c" in entry and isinstance(entry["c"], (str, type(None)))):
-            values, source, c_source = self._sources(model, method)
-            entry = {"size": self.size, "values": values, "source": source, "c": c_source,
-                     "autonomous": model.is_autonomous(method)}
+        if not self._usable(entry, model):
+            entry = self._generate(model, method)
             cache.store(key, entry)
         self.autonomous = entry["autonomous"]
+        self.read = np.array(entry["read"], dtype=bool)  # which parameters E reads (its expressions' symbols)
         self.n_args = 3 * self.n + self.m + len(model.parameter_symbols)
         self._full_size = self._outputs + self.size * 2 * self.n
         # the same code compiled by the system C compiler (numeric/native.py) when there is one: a bicycle's
         # pieces in microseconds instead of milliseconds; the Python functions otherwise
         self._native = native.load_program(key, entry["c"], {"mechsys_values": self.size,
                                                               "mechsys_full": self._full_size}, self.n_args)
+        if self._native is None and entry["source"] is None:  # compiled when stored, not here: Python after all
+            entry = {**entry, **self._python_sources(*self._expressions(model, method))}
+            cache.store(key, entry)
+        self._origin = (model, method)
         self._sources_text = (entry["source"], entry["values"])
         self._last: tuple[bytes, dict] | None = None
 
-    # the generated Python, checked and compiled only when it runs (no compiler, or a test comparing the two)
+    def _usable(self, entry: dict | None, model: MechanicalModel) -> bool:
+        """A stored entry of this shape: C source or None, both Python sources or (with C) neither."""
+        if not (isinstance(entry, dict) and entry.get("size") == self.size
+                and isinstance(entry.get("autonomous"), bool) and isinstance(entry.get("c"), (str, type(None)))
+                and isinstance(entry.get("read"), list) and len(entry["read"]) == len(model.parameter_symbols)
+                and all(isinstance(r, bool) for r in entry["read"])):
+            return False
+        python = [entry.get("source"), entry.get("values")]
+        return all(isinstance(x, str) for x in python) or (python == [None, None] and isinstance(entry["c"], str))
+
+    # the generated Python, made (when a compiler took the C form), checked and compiled only when it runs (no
+    # compiler, or a test comparing the two)
+    def _python_text(self) -> tuple[str, str]:
+        if self._sources_text[0] is None:
+            made = self._python_sources(*self._expressions(*self._origin))
+            self._sources_text = (made["source"], made["values"])
+        return self._sources_text
+
     @cached_property
     def _fn(self):
-        return function_from_source(self._sources_text[0])
+        return function_from_source(self._python_text()[0])
 
     @cached_property
     def _values(self):
-        return function_from_source(self._sources_text[1])
+        return function_from_source(self._python_text()[1])
 
-    def _sources(self, model: MechanicalModel, method: str) -> tuple[str, str, str | None]:
-        """Python sources of E alone (what a line search evaluates) and of E, M, A followed by dE/d(q, u) row by
-        row (forward differentiation of the CSE graph); the C source of both (None when there is no C form)."""
+    def _expressions(self, model: MechanicalModel, method: str) -> tuple[list, list, ForwardProgram]:
+        """The outputs E (R; S; g; Phi), M, A at t = 0, the arguments (q, u, a, lambda, p), and their program (one
+        CSE, forward differentiation of its graph for dE/d(q, u))."""
         eq = model.equations(method)
         rows = model.kin.constraints
         t0 = {model.t: 0}
@@ -101,11 +119,25 @@ class ConstrainedPieces:
         Phi = [r.position for r in rows if r.kind == "holonomic"]
         outputs = [sp.sympify(e).xreplace(t0) for e in list(R) + list(S) + g + Phi + list(eq.M) + list(eq.A)]
         args = [*model.q, *model.u, *model.a, *self.lam, *model.parameter_symbols]
-        program = value_and_jacobian_program(outputs, args, [*model.q, *model.u], rows=self.size)
-        _values, source = value_and_jacobian_sources(outputs, args, [*model.q, *model.u], program=program)
+        return outputs, args, value_and_jacobian_program(outputs, args, [*model.q, *model.u], rows=self.size)
+
+    def _python_sources(self, outputs: list, args: list, program: ForwardProgram) -> dict:
+        """Python sources of E alone (what a line search evaluates, its own CSE) and of E, M, A followed by
+        dE/d(q, u) row by row."""
+        _values, source = value_and_jacobian_sources(outputs, args, args[:2 * self.n], program=program)
+        return {"source": source, "values": generate_source(outputs[:self.size], args)}
+
+    def _generate(self, model: MechanicalModel, method: str) -> dict:
+        """The cache entry: the C source of the program (None when an expression has no C form) and, unless a C
+        compiler is there to build it, the Python sources; which parameters E reads; whether it is autonomous."""
+        outputs, args, program = self._expressions(model, method)
         c_source = native.program_source(program, {"mechsys_values": (self.size, False),
                                                    "mechsys_full": (len(outputs), True)})
-        return generate_source(outputs[:self.size], args), source, c_source
+        python = ({"source": None, "values": None} if c_source is not None and native.compiler() is not None
+                  else self._python_sources(outputs, args, program))
+        used = set().union(*(e.free_symbols for e in outputs[:self.size]))
+        return {"size": self.size, "c": c_source, **python, "autonomous": model.is_autonomous(method),
+                "read": [s in used for s in model.parameter_symbols]}
 
     def residual(self, q, u, a, lam, p) -> np.ndarray:
         """E alone (no derivatives): what a line search evaluates."""
@@ -478,14 +510,10 @@ class NonholonomicProblem(EquilibriumProblem):
 
     @cached_property
     def _parameters_read(self) -> np.ndarray:
-        """Which parameters the residual E reads: the arguments its generated code uses. A bicycle's speed only
-        sets the given rates, so dE/dv = 0 exactly and a speed sweep skips two evaluations per Jacobian."""
-        import ast
-
-        function = ast.parse(self.pieces._sources_text[1]).body[0]
-        used = {node.id for stmt in function.body for node in ast.walk(stmt) if isinstance(node, ast.Name)}
-        first = len(function.args.args) - len(self.model.parameter_symbols)
-        return np.array([f"a{first + k}" in used for k in range(len(self.model.parameter_symbols))], dtype=bool)
+        """Which parameters the residual E reads: the symbols of its expressions (stored with the pieces). A
+        bicycle's speed only sets the given rates, so dE/dv = 0 exactly and a speed sweep skips two evaluations per
+        Jacobian."""
+        return self.pieces.read
 
     def Fp_along(self, z: np.ndarray, p: np.ndarray, direction: np.ndarray) -> np.ndarray:
         """dF/dp . direction by a central difference (the parameters enter M, f and the constraints everywhere;
