@@ -260,3 +260,26 @@ def test_an_implicit_method_on_overflowing_equations_is_one_reasoned_line(tmp_pa
                               for line in text.splitlines()) + "\n")
     err = analysis_error("simulate", path, "--t-end", "0.1", "--method", "Radau", "--set", "e=0")
     assert "not finite" in err
+
+
+@pytest.mark.parametrize("native", ["on", "off"])
+def test_a_domain_error_in_a_closed_loop_is_one_reasoned_line(native, tmp_path, monkeypatch):
+    """Found by the rotating-seed CLI fuzz (seed 20261126001918): the overdriven slider-crank with g = 1e200 drives
+    the state to where sqrt and asin leave their domain. Python's math raised `ValueError: math domain error` and
+    then numpy's SVD of the resulting nan matrix did not converge: both were internal errors. Generated code now
+    gives nan there as C and numpy do, and the closed loop's step fails with the time it reached."""
+    monkeypatch.setenv("MECHSYS_NATIVE", native)
+    text = (DATA / "overdriven_slider_crank.yaml").read_text()
+    path = tmp_path / "heavy.yaml"
+    path.write_text(text.replace("g: 9.81", "g: 1.0e+200"))
+    assert "g: 1.0e+200" in path.read_text()
+    err = analysis_error("simulate", path, "--t-end", "0.1", "--rtol", "1e-12")
+    assert "integration failed at t =" in err or "left the constraint manifold" in err
+
+
+def test_generated_code_outside_a_math_domain_gives_nan_like_numpy():
+    from mechsys.numeric.runtime import call_generated, function_from_source
+
+    fn = function_from_source("def _f(x):\n    return [math.sqrt(x), math.asin(x)]\n")
+    assert call_generated(fn, [0.25], 2) == [0.5, math.asin(0.25)]
+    assert all(math.isnan(v) for v in call_generated(fn, [-2.0], 2))

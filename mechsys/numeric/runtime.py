@@ -63,13 +63,14 @@ def function_from_source(source: str) -> Callable[..., list[float]]:
 
 
 def call_generated(fn: Callable[..., list[float]], args: Sequence[float], size: int) -> list[float]:
-    """``fn(*args)`` with IEEE semantics: Python's float arithmetic raises where numpy gives inf or nan (x**2 past
-    1e308, 1/0), so those become inf or nan entries and the callers' finiteness checks report them."""
+    """``fn(*args)`` with IEEE semantics: Python's float arithmetic raises where numpy and C give inf or nan (x**2
+    past 1e308, 1/0, sqrt or asin outside their domain), so those become inf or nan entries and the callers'
+    finiteness checks report them."""
     try:
         return fn(*args)
     except OverflowError:
         return [math.inf] * size
-    except ZeroDivisionError:
+    except (ZeroDivisionError, ValueError):  # ValueError: math domain error (the source is arithmetic only)
         return [math.nan] * size
 
 

@@ -292,8 +292,10 @@ class RightHandSide:
         n, m = self.c.n, A.shape[0]
         K = np.zeros((n + m, n + m))
         K[:n, :n], K[:n, n:], K[n:, :n] = M, A.T, A
-        sol = np.linalg.lstsq(K, np.concatenate([f, b]), rcond=None)[0] if np.linalg.cond(K) > 1e14 else \
-            np.linalg.solve(K, np.concatenate([f, b]))
+        rhs = np.concatenate([f, b])
+        if not (np.all(np.isfinite(K)) and np.all(np.isfinite(rhs))):  # an overflow or a domain error: the
+            return np.full(n, np.nan), np.full(m, np.nan)  # integrator's step fails and reports t (no SVD of nan)
+        sol = np.linalg.lstsq(K, rhs, rcond=None)[0] if np.linalg.cond(K) > 1e14 else np.linalg.solve(K, rhs)
         return sol[:n], -sol[n:]
 
     def _check_pace(self) -> None:
