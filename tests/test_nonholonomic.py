@@ -135,6 +135,18 @@ def test_lagrange_and_kane_linearizations_agree():
     assert np.allclose(a.M, b.M, rtol=1e-12) and np.allclose(a.K, b.K, rtol=1e-10, atol=1e-12)
 
 
+def test_the_continuations_eigenvalues_are_those_of_the_deflated_pencil():
+    """A sweep reads the eigenvalues the linearization computed (no second eigensolve of the pencil (A, I))."""
+    from mechsys.analysis.equilibrium.stability import eigen, pencil_eigenvalues, reduced_pencil
+
+    model = load_system("rolling_disk", {"lean": 0.2})
+    res = find_equilibria(model)
+    assert res.equilibria
+    for e in res.equilibria:
+        A, B, _ = reduced_pencil(res.problem, e)
+        assert np.allclose(pencil_eigenvalues(res.problem, e), eigen(A, B)[0], rtol=1e-12, atol=1e-12)
+
+
 def test_steady_problem_split_is_reported_and_structural():
     model = load_data("nonholonomic/wheel")
     problem = make_problem(model)

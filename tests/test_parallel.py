@@ -95,6 +95,36 @@ def test_a_closed_branch_is_traced_once_whether_forked_or_not(forked):
     assert len(out[1]) == 1 and out[1][0].points[0].p == out[1][0].points[-1].p  # one closed branch
 
 
+def test_forked_starts_at_a_later_sample_value_wait_for_the_branches_traced_before(forked, monkeypatch):
+    """Starts at a later sample value often lie on branches still being traced: they are not traced ahead (a
+    bicycle sweep threw away a third of its workers' halves so). Here every start at p = 0.81 lies on a branch
+    of the starts at p = 0.5, so forked as serial no half is traced from one of them."""
+    import multiprocessing
+
+    traced = multiprocessing.Value("i", 0)  # halves traced from a start at p = 0.81, in any process
+    run = co._Continuation.run
+
+    def counted(self, z0, direction):
+        if z0[-1] == 0.81:
+            with traced.get_lock():
+                traced.value += 1
+        return run(self, z0, direction)
+
+    monkeypatch.setattr(co._Continuation, "run", counted)  # before the workers fork: they inherit it
+    F, Fx, Fp, eig = pitchfork_with_an_undefined_start()
+    root = float(np.sqrt(0.5))
+    starts = [(np.array([0.0]), 0.5), (np.array([root]), 0.5), (np.array([-root]), 0.5),
+              (np.array([0.0]), 0.81), (np.array([0.9]), 0.81), (np.array([-0.9]), 0.81)]
+    runs = {}
+    for workers in (1, 2):
+        forked(workers)
+        traced.value = 0
+        runs[workers] = co.sweep_parameter(F, Fx, Fp, starts, 0.1, 1.0, eig, ds=0.05, ds_max=0.1)
+        assert traced.value == 0
+    _branches_equal(runs[1], runs[2])
+    assert len(runs[1]) == 3
+
+
 def test_a_forked_sweep_of_a_rolling_disk_equals_the_serial_one(forked):
     """The whole sweep (multistart at 5 sample rates, continuation, verdicts from the linearizations the workers
     computed) of a nonholonomic model, forked and serial."""

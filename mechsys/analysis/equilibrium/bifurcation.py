@@ -11,7 +11,7 @@ import sympy as sp
 from mechsys.analysis.equilibrium.continuation import Branch, Undefined, sweep_parameter
 from mechsys.analysis.equilibrium.equilibria import (EquilibriumProblem, drop_singular, make_problem, singular_note,
                                                      solve_equilibria, wrap)
-from mechsys.analysis.equilibrium.stability import ZERO_RE, assess, eigen, reduced_pencil
+from mechsys.analysis.equilibrium.stability import ZERO_RE, assess, pencil_eigenvalues
 from mechsys.errors import AnalysisError, InputError
 from mechsys.mechanics.model import MechanicalModel
 from mechsys.numeric.lambdify import compile_exprs
@@ -214,10 +214,9 @@ def sweep(model: MechanicalModel, name: str, start: float, stop: float, points: 
         z = D * z
         par.at(p)
         try:
-            A, B, _ = reduced_pencil(problem, problem.equilibrium(z))
+            return pencil_eigenvalues(problem, problem.equilibrium(z))
         except AnalysisError as exc:  # e.g. a singular saddle-point system: the branch ends here, with the reason
             raise Undefined(str(exc)) from None
-        return eigen(A, B)[0]
 
     starts = []
     undefined = []

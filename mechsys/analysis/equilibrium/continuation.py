@@ -671,11 +671,14 @@ def sweep_parameter(F: ArrayFn, Fx: ArrayFn, Fp: ArrayFn, starts: list[tuple[np.
     with Workers(half, 2 * len(starts), share) as workers:
         # a start on a branch already traced is skipped. Workers trace the halves of the next starts ahead; a
         # start found on a branch that finished meanwhile is then dropped (and a backward half when the forward
-        # one closed), so the branches are those of the serial loop
+        # one closed), so the branches are those of the serial loop. Only starts at the parameter value of those
+        # in flight go ahead: distinct roots at one value lie on one branch only past a fold, while a start at
+        # another value often lies on a branch still being traced (work thrown away)
         handles: dict[int, tuple[Any, Any, int]] = {}  # start -> (forward, backward, branches checked against)
         ahead = 0
         for k in range(len(setups)):
-            while ahead < len(setups) and len(handles) < workers.processes:
+            while ahead < len(setups) and len(handles) < workers.processes \
+                    and all(starts[j][1] == starts[ahead][1] for j in handles):
                 if new(ahead):
                     handles[ahead] = (workers.submit(2 * ahead), workers.submit(2 * ahead + 1), len(out))
                 ahead += 1

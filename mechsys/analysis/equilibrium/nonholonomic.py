@@ -618,6 +618,10 @@ class NonholonomicProblem(EquilibriumProblem):
         lin = self.linearization(e, getattr(self, "current_parameters", None))
         return lin.deflated, np.eye(lin.deflated.shape[0]), None
 
+    def pencil_eigenvalues(self, e: Equilibrium) -> np.ndarray:
+        """The eigenvalues of the pencil (A, I) above, as the linearization sorted them."""
+        return self.linearization(e, getattr(self, "current_parameters", None)).eigenvalues
+
     def assess(self, e: Equilibrium, p: np.ndarray) -> None:
         self.current_parameters = p
         lin = self.linearization(e, p)

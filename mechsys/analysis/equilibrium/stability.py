@@ -53,6 +53,15 @@ def problem_parameters(problem) -> np.ndarray:
     return p
 
 
+def pencil_eigenvalues(problem, e) -> np.ndarray:
+    """The finite eigenvalues of reduced_pencil(problem, e), sorted; a problem that has them already (the
+    nonholonomic linearization computes those of its deflated Jacobian) gives them without a second eigensolve."""
+    if hasattr(problem, "pencil_eigenvalues"):
+        return problem.pencil_eigenvalues(e)
+    A, B, _ = reduced_pencil(problem, e)
+    return eigen(A, B)[0]
+
+
 def eigen(A: np.ndarray, B: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
     """Finite eigenvalues of the pencil (massless coordinates give infinite ones, dropped) and the Jacobian."""
     try:
