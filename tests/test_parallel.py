@@ -96,9 +96,9 @@ def test_a_closed_branch_is_traced_once_whether_forked_or_not(forked):
 
 
 def test_forked_starts_at_a_later_sample_value_wait_for_the_branches_traced_before(forked, monkeypatch):
-    """Starts at a later sample value often lie on branches still being traced: they are not traced ahead (a
-    bicycle sweep threw away a third of its workers' halves so). Here every start at p = 0.81 lies on a branch
-    of the starts at p = 0.5, so forked as serial no half is traced from one of them."""
+    """Starts at a later sample value often lie on branches still being traced: they are not traced ahead (their
+    tracing would be thrown away). Here every start at p = 0.81 lies on a branch of the starts at p = 0.5, so
+    forked as serial no half is traced from one of them."""
     import multiprocessing
 
     traced = multiprocessing.Value("i", 0)  # halves traced from a start at p = 0.81, in any process
