@@ -201,9 +201,18 @@ def derive(
     """Print T, V, the generalized forces Q and the equations of motion M(q,t) q'' = f(q, q', t)."""
 
     def body() -> int:
-        from mechsys.report.derive import render, simplified
+        from mechsys.report import warm
 
         check_outputs(output)
+        key = None if check else warm.output_key("derive", file, {"set": list(set_ or []), "method": method.value,
+                                                                  "format": fmt.value, "raw": raw,
+                                                                  "simplify": simplify})
+        text = warm.load_text(key)
+        if text is not None:
+            emit(text, output)
+            return 0
+        from mechsys.report.derive import render, simplified
+
         model = load_model(file, set_)
         eq = model.equations(method.value)
         extra: dict = {}
@@ -221,6 +230,7 @@ def derive(
         if verdict is not None and fmt.value != "json":
             prefix = "% " if fmt.value == "latex" else ""
             text += f"{prefix}check: {verdict.summary()}\n"
+        warm.store_text(key, text)
         emit(text, output)
         if verdict is not None and not verdict.agree:
             sys.stderr.write(f"mechsys: check failed: {verdict.summary()}\n")
@@ -240,11 +250,17 @@ def info(
     """Links, joint classes, mobility, degrees of freedom and the system's class."""
 
     def body() -> int:
-        from mechsys.analysis.info import system_info
+        from mechsys.report import warm
         from mechsys.report.info import render_json, render_markdown, render_rich
 
         check_outputs(output)
-        result = system_info(load_model(file, set_))
+        key = warm.output_key("info", file, {"set": list(set_ or [])})
+        result = warm.load_info(key)
+        if result is None:
+            from mechsys.analysis.info import system_info
+
+            result = system_info(load_model(file, set_))
+            warm.store_info(key, result)
         if fmt == InfoFormat.json:
             emit(render_json(result), output)
         elif fmt == InfoFormat.markdown:

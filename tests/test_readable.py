@@ -194,8 +194,9 @@ def test_json_keeps_the_expressions_as_derived(name):
 
 
 # ------------------------------------------------------------------------------------------------ the budget
-def test_a_spent_budget_prints_the_entries_as_derived_with_a_note(monkeypatch):
-    monkeypatch.setattr(rd, "BUDGET_VISITS", 0)
+def test_a_spent_budget_prints_the_entries_as_derived_with_a_note(monkeypatch, tmp_path):
+    monkeypatch.setattr(rd, "BUDGET_VISITS", 0)  # a change of the code: its own cache (the warm outputs' key has
+    monkeypatch.setenv("MECHSYS_CACHE", str(tmp_path))  # the package's source, not a constant patched at run time)
     eq = load_system("gyrostabilizer").equations("lagrange")
     text = derive(SYSTEMS_DIR / "gyrostabilizer.yaml")
     n = sum(1 for e in entries(eq) if e.args)

@@ -1,63 +1,15 @@
 """System facts: joints and classes, mobility MO = 6n - sum (6 - c) p_c, DOF, constraint ranks, system class."""
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
-
 import numpy as np
 
 from mechsys.analysis.crosscheck import random_states
+from mechsys.analysis.facts import Info, JointRow
 from mechsys.errors import AnalysisError
 from mechsys.mechanics.model import INTERNAL_METHOD, MechanicalModel
 from mechsys.numeric import cache
 from mechsys.numeric.lambdify import matrix_source
 from mechsys.numeric.runtime import matrix_from_source
-
-
-@dataclass
-class JointRow:
-    link: str
-    parent: str
-    type: str
-    coordinates: list[str]
-    joint_class: int
-    reactions: int
-
-
-@dataclass
-class Info:
-    name: str
-    moving_links: int
-    joints: list[JointRow]
-    constraints: list[dict]
-    mobility: int
-    prescribed: list[str]
-    dof_formula: int
-    free_coordinates: list[str]
-    constraint_rank: int
-    holonomic_rank: int
-    dof: int
-    configuration_dof: int
-    redundant_constraints: int
-    holonomic: bool
-    rheonomic: bool
-    autonomous: bool
-    cyclic: list[str]
-    cyclic_basis: dict[str, str] = field(default_factory=dict)  # absent | symbolic | numeric | declared
-    cyclic_denied: list[str] = field(default_factory=list)  # `cyclic: false` in the file
-    massless_coordinates: list[str] = field(default_factory=list)
-    notes: list[str] = field(default_factory=list)
-
-    @property
-    def system_class(self) -> str:
-        parts = ["holonomic" if self.holonomic else "nonholonomic",
-                 "rheonomic" if self.rheonomic else "scleronomic",
-                 "autonomous" if self.autonomous else "non-autonomous"]
-        return ", ".join(parts)
-
-    def to_dict(self) -> dict:
-        out = asdict(self)
-        out["system_class"] = self.system_class
-        return out
 
 
 def _rank(matrix: np.ndarray) -> int:

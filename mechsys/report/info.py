@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import json
 
-from mechsys.analysis.info import Info
+from mechsys.analysis.facts import Info
 
 
 def render_json(info: Info) -> str:

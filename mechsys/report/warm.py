@@ -1,0 +1,88 @@
+"""Warm outputs of `derive` and `info`: kept by the file's bytes and the options, so a repeated command prints
+without sympy (no import, no model build: a second `derive` of the bicycle in a third of a second).
+
+What is kept is data: derive's printed text, info's facts (analysis/info.py `Info`, rendered again in the format
+asked). The key is the file's bytes, the command, every option that shapes the output (the `--set` assignments in
+their order), mechsys's version, the source of the whole package and the versions of sympy, numpy and scipy (a
+printer or a rank decision may change with them); entries are signed like every cache entry (numeric/cache.py)
+and checked for their shape. Commands that fail, `derive --check` (a verification is asked to run) and runs with
+the cache off are never stored or read. Imports nothing heavy."""
+from __future__ import annotations
+
+import hashlib
+import json
+from pathlib import Path
+from typing import Any
+
+from mechsys.numeric import cache
+
+_SOURCE: list[str] = []
+
+
+def package_fingerprint() -> str:
+    """Hash of every source file of mechsys (Python and C) and of the libraries that print and decide."""
+    if not _SOURCE:
+        from importlib.metadata import PackageNotFoundError, version
+
+        root = Path(__file__).resolve().parents[1]
+        digest = hashlib.sha256()
+        for f in sorted(root.rglob("*.py")) + sorted(root.rglob("*.c")):
+            digest.update(str(f.relative_to(root)).encode() + b"\0" + f.read_bytes())
+        for lib in ("sympy", "numpy", "scipy"):
+            try:
+                digest.update(f"{lib}={version(lib)}".encode())
+            except PackageNotFoundError:
+                digest.update(f"{lib}=?".encode())
+        _SOURCE.append(digest.hexdigest()[:16])
+    return _SOURCE[0]
+
+
+def output_key(command: str, path: Path, options: dict[str, Any]) -> str | None:
+    """The key of ``command``'s output for this file's content and options; None when the cache is off or the
+    file cannot be read (the full path then reports why)."""
+    if cache.cache_dir() is None:
+        return None
+    from mechsys import __version__
+    from mechsys.errors import InputError
+    from mechsys.model.files import read_model_text
+
+    try:
+        text = read_model_text(path)
+    except InputError:
+        return None
+    payload = json.dumps({"command": command, "options": options, "version": __version__,
+                          "code": package_fingerprint()}, sort_keys=True)
+    digest = hashlib.sha256(text.encode("utf-8"))
+    digest.update(b"\0" + payload.encode())
+    return digest.hexdigest()[:32]
+
+
+def load_text(key: str | None) -> str | None:
+    """A kept text output, or None."""
+    entry = cache.load(key) if key is not None else None
+    text = entry.get("text") if entry is not None else None
+    return text if isinstance(text, str) else None
+
+
+def store_text(key: str | None, text: str) -> None:
+    if key is not None:
+        cache.store(key, {"text": text})
+
+
+def load_info(key: str | None):
+    """Kept `info` facts (an Info), or None when missing or not of Info's shape."""
+    entry = cache.load(key) if key is not None else None
+    facts = entry.get("info") if entry is not None else None
+    if not isinstance(facts, dict):
+        return None
+    from mechsys.analysis.facts import Info
+
+    try:
+        return Info.from_dict(facts)
+    except (TypeError, ValueError, KeyError):
+        return None
+
+
+def store_info(key: str | None, info) -> None:
+    if key is not None:
+        cache.store(key, {"info": info.to_dict()})

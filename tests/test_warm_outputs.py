@@ -1,0 +1,137 @@
+"""Warm outputs of `derive` and `info` (report/warm.py): a repeated command prints what the full path printed,
+byte for byte, without importing sympy; the key follows the file, the options and the code; damaged entries and
+`derive --check` take the full path."""
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+
+import pytest
+from typer.testing import CliRunner
+
+from mechsys.cli import app
+from mechsys.numeric import cache
+from mechsys.report import warm
+from tests.helpers import ROOT, SYSTEMS_DIR
+
+PROBE = """
+import sys
+from mechsys.cli import main
+try:
+    main()
+except SystemExit as exc:
+    code = exc.code
+print("SYMPY", "sympy" in sys.modules, file=sys.stderr)
+sys.exit(code)
+"""
+
+MODELS = sorted(p.name for p in SYSTEMS_DIR.glob("*.yaml"))
+
+
+def _probe(cache_dir, *args) -> tuple[str, bool]:
+    env = {**os.environ, "MECHSYS_CACHE": str(cache_dir)}
+    proc = subprocess.run([sys.executable, "-c", PROBE, *map(str, args)], capture_output=True, text=True, env=env,
+                          cwd=ROOT)
+    assert proc.returncode == 0, proc.stderr
+    line = [x for x in proc.stderr.splitlines() if x.startswith("SYMPY")][-1]
+    return proc.stdout, line.split()[1] == "True"
+
+
+def _cli(monkeypatch, cache_dir, *args) -> str:
+    monkeypatch.setenv("MECHSYS_CACHE", str(cache_dir))
+    result = CliRunner().invoke(app, [str(a) for a in args])
+    assert result.exit_code == 0, result.output
+    return result.stdout
+
+
+def test_a_second_derive_and_info_print_the_same_without_sympy(tmp_path):
+    model = tmp_path / "centrifuge.yaml"
+    shutil.copy(SYSTEMS_DIR / "centrifuge.yaml", model)
+    full = []
+    for args in (["derive", model], ["info", model], ["derive", model, "-m", "kane", "-f", "latex"],
+                 ["info", model, "-f", "json"]):
+        first, sympy1 = _probe(tmp_path / "cache", *args)
+        second, sympy2 = _probe(tmp_path / "cache", *args)
+        assert first == second and first.strip()
+        assert sympy2 is False
+        full.append(sympy1)
+    assert full == [True, True, True, False]  # info's facts serve every format: `info -f json` was warm at once
+    # written to a file: the same text as printed
+    out = tmp_path / "eq.txt"
+    printed, _ = _probe(tmp_path / "cache", "derive", model)
+    _probe(tmp_path / "cache", "derive", model, "-o", out)
+    assert out.read_text() == printed
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", MODELS)
+def test_warm_outputs_equal_the_full_paths_for_every_bundled_model(name, tmp_path, monkeypatch):
+    """The first run (full path, kept) and the second (warm) print the same bytes, in every format kept."""
+    for args in (["derive", SYSTEMS_DIR / name], ["derive", SYSTEMS_DIR / name, "-m", "kane", "-f", "json"],
+                 ["info", SYSTEMS_DIR / name], ["info", SYSTEMS_DIR / name, "-f", "markdown"]):
+        first = _cli(monkeypatch, tmp_path / "cache", *args)
+        key = warm.output_key(args[0], args[1], _options(args))
+        assert cache.load(key) is not None  # kept by the first run
+        assert _cli(monkeypatch, tmp_path / "cache", *args) == first
+
+
+def _options(args: list) -> dict:
+    if args[0] == "info":
+        return {"set": []}
+    method = args[args.index("-m") + 1] if "-m" in args else "lagrange"
+    fmt = args[args.index("-f") + 1] if "-f" in args else "text"
+    return {"set": [], "method": method, "format": fmt, "raw": False, "simplify": False}
+
+
+def test_the_key_follows_the_file_the_options_and_the_code(tmp_path, monkeypatch):
+    monkeypatch.setenv("MECHSYS_CACHE", str(tmp_path / "cache"))
+    model = tmp_path / "m.yaml"
+    shutil.copy(SYSTEMS_DIR / "double_pendulum.yaml", model)
+    base = {"set": [], "method": "lagrange", "format": "text", "raw": False, "simplify": False}
+    key = warm.output_key("derive", model, base)
+    assert key == warm.output_key("derive", model, dict(base))
+    others = [warm.output_key("info", model, base)]
+    others += [warm.output_key("derive", model, {**base, k: v}) for k, v in
+               [("set", ["m1=2"]), ("method", "kane"), ("format", "json"), ("raw", True), ("simplify", True)]]
+    others.append(warm.output_key("derive", model, {**base, "set": ["a=1", "b=2"]}))
+    others.append(warm.output_key("derive", model, {**base, "set": ["b=2", "a=1"]}))
+    model.write_text(model.read_text() + "\n# a comment changes the bytes\n")
+    others.append(warm.output_key("derive", model, base))
+    monkeypatch.setattr(warm, "_SOURCE", ["another version of the code"])
+    shutil.copy(SYSTEMS_DIR / "double_pendulum.yaml", model)
+    others.append(warm.output_key("derive", model, base))
+    assert key not in others and len(set(others)) == len(others)
+    monkeypatch.setenv("MECHSYS_CACHE", "off")
+    assert warm.output_key("derive", model, base) is None
+    assert warm.output_key("derive", tmp_path / "missing.yaml", base) is None
+
+
+def test_an_edited_file_prints_its_own_equations(tmp_path, monkeypatch):
+    model = tmp_path / "m.yaml"
+    shutil.copy(SYSTEMS_DIR / "double_pendulum.yaml", model)
+    first = _cli(monkeypatch, tmp_path / "cache", "derive", model, "-f", "json")
+    text = model.read_text()
+    assert "name: double_pendulum" in text
+    model.write_text(text.replace("name: double_pendulum", "name: renamed_pendulum"))
+    second = _cli(monkeypatch, tmp_path / "cache", "derive", model, "-f", "json")
+    assert '"renamed_pendulum"' in second and '"renamed_pendulum"' not in first
+
+
+def test_damaged_entries_are_ignored_and_check_always_runs(tmp_path, monkeypatch):
+    model = SYSTEMS_DIR / "double_pendulum.yaml"
+    fresh = _cli(monkeypatch, tmp_path / "fresh", "derive", model)
+    info_fresh = _cli(monkeypatch, tmp_path / "fresh", "info", model, "-f", "json")
+    monkeypatch.setenv("MECHSYS_CACHE", str(tmp_path / "cache"))
+    key = warm.output_key("derive", model, _options(["derive", model]))
+    cache.store(key, {"text": ["not", "text"]})
+    assert warm.load_text(key) is None
+    assert _cli(monkeypatch, tmp_path / "cache", "derive", model) == fresh
+    info_key = warm.output_key("info", model, {"set": []})
+    cache.store(info_key, {"info": {"name": "x", "moving_links": "many"}})
+    assert warm.load_info(info_key) is None
+    assert _cli(monkeypatch, tmp_path / "cache", "info", model, "-f", "json") == info_fresh
+    # a kept output with another check line is never read by --check: the check runs
+    checked = _cli(monkeypatch, tmp_path / "cache", "derive", model, "--check")
+    assert "check:" in checked and "check:" not in fresh
