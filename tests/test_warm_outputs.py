@@ -135,3 +135,20 @@ def test_damaged_entries_are_ignored_and_check_always_runs(tmp_path, monkeypatch
     # a kept output with another check line is never read by --check: the check runs
     checked = _cli(monkeypatch, tmp_path / "cache", "derive", model, "--check")
     assert "check:" in checked and "check:" not in fresh
+
+
+def test_facts_that_are_not_plain_data_are_not_kept(tmp_path, monkeypatch):
+    import numpy as np
+
+    from mechsys.analysis.facts import Info
+
+    monkeypatch.setenv("MECHSYS_CACHE", str(tmp_path / "cache"))
+    model = SYSTEMS_DIR / "double_pendulum.yaml"
+    _cli(monkeypatch, tmp_path / "cache", "info", model, "-f", "json")
+    key = warm.output_key("info", model, {"set": []})
+    facts = warm.load_info(key)
+    assert isinstance(facts, Info) and Info.from_dict(facts.to_dict()) == facts
+    other = warm.output_key("info", model, {"set": ["m1=2"]})
+    facts.mobility = np.int64(facts.mobility)  # not JSON: not kept (no error either)
+    warm.store_info(other, facts)
+    assert cache.load(other) is None

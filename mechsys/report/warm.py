@@ -84,5 +84,13 @@ def load_info(key: str | None):
 
 
 def store_info(key: str | None, info) -> None:
-    if key is not None:
-        cache.store(key, {"info": info.to_dict()})
+    """Keep the facts, when they are plain JSON data that reads back to the same Info."""
+    if key is None:
+        return
+    facts = info.to_dict()
+    try:
+        if json.loads(json.dumps(facts)) != facts:
+            return
+    except (TypeError, ValueError):  # e.g. a numpy number among them
+        return
+    cache.store(key, {"info": facts})
