@@ -385,8 +385,7 @@ def equilibria(
     """Equilibria and steady motions, their Lyapunov stability, and (with --sweep) bifurcations."""
 
     def body() -> int:
-        from mechsys.analysis.equilibrium.equilibria import find_equilibria
-        from mechsys.report import equilibria as rep
+        from mechsys.report import warm
 
         boxes = parse_ranges(search, "--search")
         sweep_spec = parse_ranges([sweep_], "--sweep", count=True) if sweep_ else {}
@@ -398,6 +397,18 @@ def equilibria(
             raise InputError("--exhaustive returns every root: it cannot be combined with --search or --sweep")
         check_figures(plot=plot)
         check_outputs(output)
+        key = None if verify or plot is not None else warm.output_key(
+            "equilibria", file, {"set": list(set_ or []), "search": list(search or []), "sweep": sweep_,
+                                 "linearize": linearize_, "numeric": numeric, "hurwitz": hurwitz,
+                                 "exhaustive": exhaustive, "given": list(given or []), "solve": list(solve or []),
+                                 "independent": independent, "format": fmt.value, **warm.numeric_path()})
+        kept = warm.load_tables(key)
+        if kept is not None:
+            emit_tables(kept[0], fmt, output, kept[1])
+            return 0
+        from mechsys.analysis.equilibrium.equilibria import find_equilibria
+        from mechsys.report import equilibria as rep
+
         options = steady_options(given, solve, independent)
         model = load_model(file, set_)
         result = find_equilibria(model, boxes, exhaustive=exhaustive, options=options)
@@ -442,10 +453,10 @@ def equilibria(
                            else rep.hurwitz_tables(lin, label, J))
         payload = rep.equilibria_payload(result, bifurcations, verifications)
         if sweep_spec and fmt == TableFormat.csv:
-            branch_table = [t for t in tables if t.title.startswith("branches")]
-            emit_tables(branch_table, fmt, output)
-        else:
-            emit_tables(tables, fmt, output, payload)
+            tables, payload = [t for t in tables if t.title.startswith("branches")], None
+        if not failed:
+            warm.store_tables(key, tables, payload)
+        emit_tables(tables, fmt, output, payload)
         for line in failed:
             sys.stderr.write(f"mechsys: verification disagrees: {line}\n")
         return 1 if failed else 0
@@ -478,9 +489,7 @@ def modes(
     """Linear vibration: natural frequencies, damping ratios, mass-normalised modes, FRF, state space."""
 
     def body() -> int:
-        from mechsys.analysis.equilibrium import modes as modal
-        from mechsys.report import equilibria as rep
-        from mechsys.report.tables import Table
+        from mechsys.report import warm
 
         point = {}
         for item in at or []:
@@ -506,6 +515,19 @@ def modes(
             check_number(f"--frf {frf!r}: N", frf_range[2], high=MAX_POINTS)
         check_figures(plot=plot)
         check_outputs(output)
+        key = None if plot is not None else warm.output_key(
+            "modes", file, {"set": list(set_ or []), "at": list(at or []), "frf": frf, "input": frf_input,
+                            "response": frf_output, "state_space": state_space, "transfer": transfer,
+                            "given": list(given or []), "solve": list(solve or []), "independent": independent,
+                            "format": fmt.value, **warm.numeric_path()})
+        kept = warm.load_tables(key)
+        if kept is not None:
+            emit_tables(kept[0], fmt, output, kept[1])
+            return 0
+        from mechsys.analysis.equilibrium import modes as modal
+        from mechsys.report import equilibria as rep
+        from mechsys.report.tables import Table
+
         options = steady_options(given, solve, independent)
         model = load_model(file, set_)
         result = modal.vibration_modes(model, point or None, options)
@@ -549,6 +571,7 @@ def modes(
                 tables.append(t)
                 payload["transfer_function"] = {"input": inp, "response": out, "numerator": list(num),
                                                 "denominator": list(den)}
+        warm.store_tables(key, tables, payload)
         emit_tables(tables, fmt, output, payload)
         return 0
 

@@ -1,6 +1,6 @@
-"""Warm outputs of `derive` and `info` (report/warm.py): a repeated command prints what the full path printed,
-byte for byte, without importing sympy; the key follows the file, the options and the code; damaged entries and
-`derive --check` take the full path."""
+"""Warm outputs of `derive`, `info`, `equilibria` and `modes` (report/warm.py): a repeated command prints what
+the full path printed, byte for byte, without importing sympy; the key follows the file, the options, the code
+and the numeric path; damaged entries, `derive --check`, `--verify` and `--plot` take the full path."""
 from __future__ import annotations
 
 import os
@@ -152,3 +152,67 @@ def test_facts_that_are_not_plain_data_are_not_kept(tmp_path, monkeypatch):
     facts.mobility = np.int64(facts.mobility)  # not JSON: not kept (no error either)
     warm.store_info(other, facts)
     assert cache.load(other) is None
+
+
+#: models whose equilibria and modes are compared (holonomic, cyclic, prescribed, closed loop, rolling)
+NUMERIC_MODELS = ["double_pendulum.yaml", "centrifuge.yaml", "indicator.yaml", "four_bar.yaml", "rolling_disk.yaml"]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", NUMERIC_MODELS)
+def test_warm_equilibria_and_modes_equal_the_full_paths(name, tmp_path, monkeypatch):
+    monkeypatch.setenv("MECHSYS_CACHE", str(tmp_path / "cache"))
+    for args in (["equilibria", SYSTEMS_DIR / name], ["equilibria", SYSTEMS_DIR / name, "-f", "json"],
+                 ["modes", SYSTEMS_DIR / name, "-f", "json"], ["modes", SYSTEMS_DIR / name, "-f", "markdown"]):
+        first = CliRunner().invoke(app, [str(a) for a in args])
+        second = CliRunner().invoke(app, [str(a) for a in args])
+        assert (second.exit_code, second.stdout) == (first.exit_code, first.stdout)
+        assert first.exit_code in (0, 1)  # modes without a stable equilibrium ends with a reason (and nothing kept)
+
+
+def test_a_second_sweep_and_modes_print_the_same_without_sympy(tmp_path):
+    model = tmp_path / "centrifuge.yaml"
+    shutil.copy(SYSTEMS_DIR / "centrifuge.yaml", model)
+    for args in (["equilibria", model, "--set", "dM=7.142857142857143", "--sweep", "Mo=10:70:61", "-f", "csv"],
+                 ["modes", model], ["equilibria", model, "--linearize", "-f", "json"]):
+        first, sympy1 = _probe(tmp_path / "cache", *args)
+        second, sympy2 = _probe(tmp_path / "cache", *args)
+        assert first == second and first.strip()
+        assert sympy1 is True and sympy2 is False
+
+
+def test_the_numeric_commands_key_follows_the_options_and_the_numeric_path(tmp_path, monkeypatch):
+    model = tmp_path / "c.yaml"
+    shutil.copy(SYSTEMS_DIR / "centrifuge.yaml", model)
+    first = _cli(monkeypatch, tmp_path / "cache", "equilibria", model, "-f", "markdown")
+    for extra in (["--set", "Mo=30"], ["--search", "beta=-1:1"], ["--linearize"], ["--hurwitz"], ["-f", "csv"]):
+        assert _cli(monkeypatch, tmp_path / "cache", "equilibria", model, "-f", "markdown", *extra) != first
+    monkeypatch.setenv("MECHSYS_NATIVE", "off")  # the Python path: another key (its last digits may differ)
+    assert warm.numeric_path() == {"compiler": None}
+    base = {"set": [], "format": "json"}
+    keys = {warm.output_key("modes", model, {**base, **warm.numeric_path()})}
+    monkeypatch.delenv("MECHSYS_NATIVE")
+    keys.add(warm.output_key("modes", model, {**base, **warm.numeric_path()}))
+    from mechsys.numeric import native
+
+    assert len(keys) == (2 if native.compiler() is not None else 1)
+
+
+def test_kept_tables_read_back_as_printed_and_damaged_ones_are_ignored(tmp_path, monkeypatch):
+    from mechsys.report.tables import Table, render_tables
+
+    monkeypatch.setenv("MECHSYS_CACHE", str(tmp_path / "cache"))
+    t = Table("t", ["a", "b"], [[1, 2.5], [complex(1.0, -2.0), "x"], [True, None], [float("nan"), 1e300]], ["note"])
+    payload = {"x": [1.0, 2.0], "z": complex(0.5, 1.5)}
+    warm.store_tables("k" * 32, [t], payload)
+    tables, back = warm.load_tables("k" * 32)
+    for fmt in ("json", "csv", "markdown", "latex"):
+        assert render_tables(tables, fmt, back) == render_tables([t], fmt, payload)
+    cache.store("d" * 32, {"tables": [{"title": 1, "columns": [], "notes": [], "rows": []}], "payload": None})
+    assert warm.load_tables("d" * 32) is None
+    cache.store("e" * 32, {"tables": [{"title": "t", "columns": ["a"], "notes": [], "rows": [[{"x": 1}]]}]})
+    assert warm.load_tables("e" * 32) is None
+    import numpy as np
+
+    warm.store_tables("f" * 32, [Table("t", ["a"], [[np.int64(3)]])], None)  # not a plain cell: not kept
+    assert cache.load("f" * 32) is None

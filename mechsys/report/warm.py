@@ -1,12 +1,15 @@
-"""Warm outputs of `derive` and `info`: kept by the file's bytes and the options, so a repeated command prints
-without sympy (no import, no model build: a second `derive` of the bicycle in a third of a second).
+"""Warm outputs of `derive`, `info`, `equilibria` and `modes`: kept by the file's bytes and the options, so a
+repeated command prints without sympy (no import, no model build: a second `derive` of the bicycle in a third of
+a second).
 
-What is kept is data: derive's printed text, info's facts (analysis/info.py `Info`, rendered again in the format
-asked). The key is the file's bytes, the command, every option that shapes the output (the `--set` assignments in
-their order), mechsys's version, the source of the whole package and the versions of sympy, numpy and scipy (a
-printer or a rank decision may change with them); entries are signed like every cache entry (numeric/cache.py)
-and checked for their shape. Commands that fail, `derive --check` (a verification is asked to run) and runs with
-the cache off are never stored or read. Imports nothing heavy."""
+What is kept is data: derive's printed text, info's facts (analysis/facts.py `Info`, rendered again in the format
+asked), the tables and JSON payload of `equilibria` and `modes` (rendered again, so a text table fits the
+terminal). The key is the file's bytes, the command, every option that shapes the output (the `--set`
+assignments in their order), mechsys's version, the source of the whole package and the versions of sympy, numpy
+and scipy (a printer or a rank decision may change with them), and for the numeric commands the C compiler used
+(none, or MECHSYS_NATIVE=off: the Python path, whose last digits may differ). Entries are signed like every cache
+entry (numeric/cache.py) and checked for their shape. Commands that fail, that verify or draw (`derive --check`,
+`equilibria --verify`, `--plot`) and runs with the cache off are never stored or read. Imports nothing heavy."""
 from __future__ import annotations
 
 import hashlib
@@ -81,6 +84,69 @@ def load_info(key: str | None):
         return Info.from_dict(facts)
     except (TypeError, ValueError, KeyError):
         return None
+
+
+def numeric_path() -> dict[str, Any]:
+    """What decides the numeric path of an analysis (an option of its key): the C compiler, or None."""
+    from mechsys.numeric import native
+
+    return {"compiler": native.compiler()}
+
+
+def _cell(x: Any) -> Any:
+    """A table cell as JSON data (ValueError for what would not read back as the same cell)."""
+    if x is None or isinstance(x, (bool, str)):
+        return x
+    if isinstance(x, complex):
+        return {"complex": [float(x.real), float(x.imag)]}
+    if isinstance(x, float):
+        return float(x)
+    if isinstance(x, int) and type(x) is int:
+        return x
+    raise ValueError(f"a table cell of type {type(x).__name__}")
+
+
+def _uncell(x: Any) -> Any:
+    if isinstance(x, dict):
+        re, im = x["complex"]
+        return complex(float(re), float(im))
+    if x is None or isinstance(x, (bool, str, int, float)):
+        return x
+    raise ValueError("not a table cell")
+
+
+def store_tables(key: str | None, tables: list, payload: Any) -> None:
+    """Keep the tables and the JSON payload that were printed (their cells and the payload as JSON data)."""
+    if key is None:
+        return
+    from mechsys.report.tables import _json_default
+
+    try:
+        data = [{"title": str(t.title), "columns": [str(c) for c in t.columns], "notes": [str(n) for n in t.notes],
+                 "rows": [[_cell(c) for c in row] for row in t.rows]} for t in tables]
+        plain = json.loads(json.dumps(payload, default=_json_default))
+    except (TypeError, ValueError):
+        return
+    cache.store(key, {"tables": data, "payload": plain})
+
+
+def load_tables(key: str | None) -> tuple[list, Any] | None:
+    """Kept (tables, payload), or None when missing or not of that shape."""
+    entry = cache.load(key) if key is not None else None
+    if entry is None or not isinstance(entry.get("tables"), list):
+        return None
+    from mechsys.report.tables import Table
+
+    try:
+        tables = []
+        for t in entry["tables"]:
+            if not (isinstance(t["title"], str) and all(isinstance(c, str) for c in t["columns"] + t["notes"])):
+                return None
+            tables.append(Table(t["title"], list(t["columns"]), [[_uncell(c) for c in row] for row in t["rows"]],
+                                list(t["notes"])))
+    except (KeyError, TypeError, ValueError):
+        return None
+    return tables, entry.get("payload")
 
 
 def store_info(key: str | None, info) -> None:
