@@ -4,8 +4,8 @@ sympy.physics.mechanics (KanesMethod + lambdify with CSE) on the same bicycle, i
 
 Every mechsys figure is the wall time of a whole `mechsys` process (imports included) on systems/bicycle.yaml,
 run twice in a row on one fresh, private cache folder: "cold" is the first command on the model (nothing
-cached), "again" the same command repeated (derivations, cyclic decisions and compiled code read back; `derive`
-and `info` print their kept output, report/warm.py), and "after" the command run after the ones listed above it
+cached), "again" the same command repeated (`derive`, `info` and `modes` print their kept output without
+sympy, report/warm.py; `simulate` runs its warm plan), and "after" the command run after the ones listed above it
 on one shared cache (a different second command on the model). The
 baseline is timed in a fresh process too: sympy's own bicycle (test_kane3, benchmarks/bicycle_sympy.py) built,
 kanes_equations, then the mass matrix and forcing (full, with the kinematic rows) lambdified with cse=True.
@@ -111,8 +111,8 @@ def main() -> int:
             print(f"{name:<16} {cold:9.2f} {cold / base:8.2f} {warm:10.2f} {warm / base:8.2f} {after:10.2f} "
                   f"{after / base:8.2f}  {rc1}/{rc2}/{rc3}")
     print("\nratio < 1: faster than the sympy pipeline's work; each mechsys time is a whole process (about 1 s of "
-          "it imports where sympy is needed). again: the same command repeated (derive and info print their kept "
-          "output without sympy); after: the command run after those above it on one cache (another second "
+          "it imports where sympy is needed). again: the same command repeated (derive, info and modes print their "
+          "kept output without sympy); after: the command run after those above it on one cache (another second "
           "command on the model)")
     return 1 if failed else 0
 
