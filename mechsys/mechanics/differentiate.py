@@ -12,6 +12,8 @@ from __future__ import annotations
 import sympy as sp
 from sympy.core.function import ArgumentIndexError, Function
 
+from mechsys.mechanics.dag import FreeSymbols
+
 _OWN_RULES = (sp.Add, sp.Mul, sp.Pow, sp.sin, sp.cos)
 
 
@@ -19,21 +21,8 @@ class Differentiator:
     """d(expr)/d(symbol), remembered per (node, symbol) for the lifetime of the object (one model)."""
 
     def __init__(self) -> None:
-        self._free: dict[sp.Basic, frozenset] = {}
         self._memo: dict[tuple[sp.Basic, sp.Symbol], sp.Expr] = {}
-
-    def free(self, expr: sp.Basic) -> frozenset:
-        """expr.free_symbols, remembered per node (sympy recomputes it at every call)."""
-        hit = self._free.get(expr)
-        if hit is None:
-            if expr.is_Symbol:
-                hit = frozenset((expr,))
-            elif type(expr) in _OWN_RULES:
-                hit = frozenset().union(*(self.free(a) for a in expr.args))
-            else:
-                hit = frozenset(expr.free_symbols)
-            self._free[expr] = hit
-        return hit
+        self.free = FreeSymbols().of  # expr.free_symbols, remembered per node (sympy recomputes it every call)
 
     def __call__(self, expr: sp.Basic | sp.MatrixBase, x: sp.Symbol) -> sp.Basic:
         """What sympy.diff(expr, x) gives (elementwise for a matrix)."""

@@ -7,6 +7,7 @@ from functools import cached_property
 import sympy as sp
 
 from mechsys.mechanics.build import Body, Builder, Kinematics
+from mechsys.mechanics.dag import FreeSymbols
 from mechsys.mechanics.differentiate import Differentiator
 from mechsys.mechanics.kinematics import FrameState, rate_coefficients, time_derivative
 from mechsys.model.load import T as TIME
@@ -391,7 +392,8 @@ class MechanicalModel:
 
     def _decide_autonomous(self, method: str) -> bool:
         eq = self.equations(method)
-        parts = [m for m in (eq.M, eq.f, eq.A, eq.b) if m.shape[0] and self.t in sp.sympify(m).free_symbols]
+        symbols = FreeSymbols()
+        parts = [m for m in (eq.M, eq.f, eq.A, eq.b) if m.shape[0] and self.t in symbols.of_all(m)]
         if not parts:
             return True
         import numpy as np

@@ -6,6 +6,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import sympy as sp
 
+from mechsys.mechanics.dag import FreeSymbols
+
 #: A coordinate is numerically cyclic when shifting it changes no entry of M, f, A, b by more than this (relative).
 ROUND_OFF = 1e-9
 #: Entries larger than this (operation count) are not simplified symbolically; the numerical decision stands.
@@ -42,9 +44,8 @@ def decide(model) -> CyclicDecision:
              if m.shape[0] and m.shape[1]]
     declared = {name: c.cyclic for name, c in model.doc.spec.coordinates.items()
                 if c.cyclic is not None and name in model.coordinates}
-    present: set = set()
-    for m in parts:
-        present |= m.free_symbols
+    symbols = FreeSymbols()  # the entries share their subtrees: each walked once, not once per entry and name
+    present = symbols.of_all(e for m in parts for e in m)
     out = CyclicDecision(denied=[n for n, v in declared.items() if v is False])
     values = np.array([model.parameters[s.name] for s in model.parameter_symbols], dtype=float)
     generic = values * np.random.default_rng(17).uniform(0.7, 1.3, len(values))
@@ -65,7 +66,7 @@ def decide(model) -> CyclicDecision:
             out.basis[name] = "absent"
         elif check.independent(i, generic):
             out.names.append(name)
-            out.basis[name] = "symbolic" if _proven_constant([e for m in parts for e in m if q in e.free_symbols], q) \
+            out.basis[name] = "symbolic" if _proven_constant([e for m in parts for e in m if q in symbols.of(e)], q) \
                 else "numeric"
     return out
 

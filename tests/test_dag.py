@@ -1,0 +1,53 @@
+"""mechanics/dag.py: the free symbols of expression DAGs, each shared subexpression visited once, equal sympy's
+free_symbols on derived equations, on random expressions with bound variables and conditions, and on trees deeper
+than Python's recursion limit."""
+from __future__ import annotations
+
+import random
+
+import pytest
+import sympy as sp
+
+import mechsys
+from helpers import SYSTEMS_DIR
+from mechsys.mechanics.dag import FreeSymbols
+
+
+@pytest.mark.parametrize("name", ["bicycle", "rolling_disk", "indicator", "four_bar"])
+def test_the_free_symbols_of_derived_equations_are_sympys(name):
+    model = mechsys.load(SYSTEMS_DIR / f"{name}.yaml")
+    symbols = FreeSymbols()
+    for method in ("lagrange", "kane"):
+        eq = model.equations(method)
+        entries = [e for m in (eq.M, eq.f, eq.A, eq.b) for e in m] + [eq.T, eq.V]
+        for e in entries:
+            assert symbols.of(e) == e.free_symbols
+        assert symbols.of_all(eq.M) == eq.M.free_symbols
+
+
+def test_random_expressions_with_bound_variables_and_conditions():
+    x, y, a = sp.symbols("x y a")
+    rng = random.Random(11)
+    leaves = [x, y, a, sp.Integer(2), sp.Float(0.5), sp.pi]
+
+    def grow(depth: int) -> sp.Expr:
+        if depth == 0:
+            return rng.choice(leaves)
+        u, v = grow(depth - 1), grow(depth - 1)
+        return rng.choice([u + v, u * v, u**v, sp.sin(u) * v, sp.Abs(u) - v, sp.Min(u, v), sp.Max(u, a),
+                           sp.Piecewise((u, v > 0), (v, True)), sp.Integral(u * x, (x, 0, 1)) + v,
+                           sp.Derivative(sp.Function("g")(x, a), x) * u,
+                           sp.Sum(u * x, (x, 1, 3))])
+
+    symbols = FreeSymbols()
+    for _ in range(200):
+        e = grow(rng.randrange(1, 5))
+        assert symbols.of(e) == e.free_symbols, e
+
+
+def test_a_tree_deeper_than_the_recursion_limit():
+    x = sp.Symbol("x")
+    e = x
+    for k in range(5000):
+        e = sp.Add(sp.Mul(e, sp.Symbol(f"c{k % 7}"), evaluate=False), sp.Integer(1), evaluate=False)
+    assert FreeSymbols().of(e) == {x} | {sp.Symbol(f"c{k}") for k in range(7)}
