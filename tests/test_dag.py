@@ -40,7 +40,7 @@ def test_random_expressions_with_bound_variables_and_conditions():
                            sp.Sum(u * x, (x, 1, 3))])
 
     symbols = FreeSymbols()
-    for _ in range(200):
+    for _ in range(80):
         e = grow(rng.randrange(1, 5))
         assert symbols.of(e) == e.free_symbols, e
 
