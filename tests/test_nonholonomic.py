@@ -135,6 +135,22 @@ def test_lagrange_and_kane_linearizations_agree():
     assert np.allclose(a.M, b.M, rtol=1e-12) and np.allclose(a.K, b.K, rtol=1e-10, atol=1e-12)
 
 
+@pytest.mark.parametrize("name, method", [("bicycle", "kane"), ("rolling_disk", "lagrange")])
+def test_the_saddle_residuals_are_the_matrix_products(name, method):
+    """R = M a - f - A^T lambda and S = A a - b built entry by entry are sympy's matrix expressions (srepr)."""
+    import sympy as sp
+
+    from mechsys.analysis.equilibrium.nonholonomic import saddle_residuals
+
+    model = load_system(name)
+    eq = model.equations(method)
+    lam = sp.symbols(f"lam0:{eq.A.shape[0]}")
+    R, S = saddle_residuals(eq.M, eq.f, eq.A, eq.b, model.a, lam)
+    a = sp.Matrix(model.a)
+    expected = list(eq.M * a - eq.f - eq.A.T * sp.Matrix(lam)) + list(eq.A * a - eq.b)
+    assert len(R + S) == len(expected) and all(sp.srepr(x) == sp.srepr(y) for x, y in zip(R + S, expected))
+
+
 def test_the_continuations_eigenvalues_are_those_of_the_deflated_pencil():
     """A sweep reads the eigenvalues the linearization computed (no second eigensolve of the pencil (A, I))."""
     from mechsys.analysis.equilibrium.stability import eigen, pencil_eigenvalues, reduced_pencil

@@ -112,9 +112,7 @@ class ConstrainedPieces:
         eq = model.equations(method)
         rows = model.kin.constraints
         t0 = {model.t: 0}
-        a = sp.Matrix(model.a)
-        R = eq.M * a - eq.f - (eq.A.T * sp.Matrix(self.lam) if self.m else sp.zeros(self.n, 1))
-        S = eq.A * a - eq.b
+        R, S = saddle_residuals(eq.M, eq.f, eq.A, eq.b, model.a, self.lam)
         g = [r.velocity for r in rows]
         Phi = [r.position for r in rows if r.kind == "holonomic"]
         outputs = [sp.sympify(e).xreplace(t0) for e in list(R) + list(S) + g + Phi + list(eq.M) + list(eq.A)]
@@ -186,6 +184,20 @@ def constrained_pieces(model: MechanicalModel, method: str = "kane") -> Constrai
 
 
 # ----------------------------------------------------------------------------------------- the split
+def saddle_residuals(M: sp.Matrix, f: sp.Matrix, A: sp.Matrix, b: sp.Matrix, a: list, lam: list) -> tuple[list, list]:
+    """R = M a - f - A^T lambda and S = A a - b, entry by entry: the expressions sympy's matrix products give
+    (tests/test_nonholonomic.py compares them), without its check of every nonzero entry of M for infinities (a
+    zero times each entry, whose assumptions queries walk the bicycle's large entries: a second of a cold modes)."""
+    n, m = M.shape[0], A.shape[0]
+
+    def dot(pairs) -> sp.Expr:
+        return sp.Add(*[x * y for x, y in pairs if x != 0])
+
+    R = [dot((M[i, j], a[j]) for j in range(n)) - f[i] - dot((A[k, i], lam[k]) for k in range(m)) for i in range(n)]
+    S = [dot((A[k, j], a[j]) for j in range(n)) - b[k] for k in range(m)]
+    return R, S
+
+
 @dataclass
 class Split:
     """Which speeds and coordinates are independent, and which coordinates are ignorable."""
