@@ -304,6 +304,16 @@ def emit_tables(tables, fmt: "TableFormat", output: Optional[Path], payload: dic
         write_atomic(output, console.export_text())
 
 
+def emit_kept_tables(key: Optional[str], fmt: "TableFormat", output: Optional[Path]) -> bool:
+    """Print the tables a previous run of the same command kept (report/warm.py); False when there are none."""
+    from mechsys.report import warm
+
+    kept = warm.load_tables(key)
+    if kept is not None:
+        emit_tables(kept[0], fmt, output, kept[1])
+    return kept is not None
+
+
 def parse_ranges(items: Optional[List[str]], option: str, count: bool = False) -> dict:
     """NAME=LO:HI (or NAME=START:STOP:N with count) into {name: (lo, hi[, n])}."""
     out = {}
@@ -402,9 +412,7 @@ def equilibria(
                                  "linearize": linearize_, "numeric": numeric, "hurwitz": hurwitz,
                                  "exhaustive": exhaustive, "given": list(given or []), "solve": list(solve or []),
                                  "independent": independent, "format": fmt.value, **warm.numeric_path()})
-        kept = warm.load_tables(key)
-        if kept is not None:
-            emit_tables(kept[0], fmt, output, kept[1])
+        if emit_kept_tables(key, fmt, output):
             return 0
         from mechsys.analysis.equilibrium.equilibria import find_equilibria
         from mechsys.report import equilibria as rep
@@ -520,9 +528,7 @@ def modes(
                             "response": frf_output, "state_space": state_space, "transfer": transfer,
                             "given": list(given or []), "solve": list(solve or []), "independent": independent,
                             "format": fmt.value, **warm.numeric_path()})
-        kept = warm.load_tables(key)
-        if kept is not None:
-            emit_tables(kept[0], fmt, output, kept[1])
+        if emit_kept_tables(key, fmt, output):
             return 0
         from mechsys.analysis.equilibrium import modes as modal
         from mechsys.report import equilibria as rep

@@ -25,9 +25,9 @@ class FreeSymbols:
         return hit[1] if hit is not None and hit[0] is node else None
 
     def of(self, expr: sp.Basic) -> frozenset:
-        hit = self._memo.get(id(expr))
-        if hit is not None and hit[0] is expr:
-            return hit[1]
+        hit = self._known(expr)
+        if hit is not None:
+            return hit
         expr = sp.sympify(expr)
         stack = [(expr, False)]
         while stack:  # iterative post-order: deep sums and products never reach the recursion limit

@@ -14,8 +14,6 @@ from sympy.core.function import ArgumentIndexError, Function
 
 from mechsys.mechanics.dag import FreeSymbols
 
-_OWN_RULES = (sp.Add, sp.Mul, sp.Pow, sp.sin, sp.cos)
-
 
 class Differentiator:
     """d(expr)/d(symbol), remembered per (node, symbol) for the lifetime of the object (one model)."""
