@@ -163,6 +163,35 @@ def test_a_bicycle_lying_flat_is_a_coordinate_singularity_not_a_steady_motion():
     assert up["stability"] == "asymptotically stable"
 
 
+def test_a_steady_motion_whose_split_is_singular_to_round_off_has_no_linearization():
+    """At v = 0 a steady turn of the upside-down bicycle ends in a pivot about the rear contact (front wheel and yaw
+    turning, 21.7 and 6.94 rad/s): a root of the steady-motion equations where the velocity constraints do not
+    determine the dependent speeds (their block in them is singular to round-off, A itself is not). The solves of
+    the linearization passed there and gave eigenvalues of 7e7 and a verdict "unstable" in the sweep's table;
+    the test that drops such roots from a search (with a margin) now ends a branch next to it, with the reason."""
+    from mechsys.errors import AnalysisError
+
+    problem, speed = speed_problem()
+    p = speed.at(0.0)
+    z = np.array([3.135923747987055, 2.6131589388272718, -1.5995573978259874, -0.3378905747362833,
+                  -1.2959596337500634e-18, -3.3881006952286914e-21, 21.715458216562787, 6.938202940146218,
+                  4.739714389653464e-19, -1.203586352136275e-17, -1.2868103266088941e-15, -4.2213732675506364e-16,
+                  -7.533320116453745e-30, -27.208215065034747, 9.572175357520338e-19, -1.311983677014752,
+                  50.08276038451176, 1.8465042908069744])
+    assert np.max(np.abs(problem.F(z, p))) < 1e-10  # a steady motion
+    assert np.linalg.svd(problem._at(z, p)["A"], compute_uv=False)[-1] > 0.1  # A has full rank
+    why = problem.split_singularity(z, p)
+    assert why is not None and why.startswith("the velocity constraints do not determine der(chi)")
+    with pytest.raises(AnalysisError, match="to the precision a linearization needs"):
+        linearize_steady(problem, problem.equilibrium(z), p)
+    # on the branch towards it the block is nearly singular: its smallest singular value falls as v, and the
+    # eigenvalues lose digits about as its square; below LINEARIZATION_RTOL (relative) there is no linearization
+    near = _polish(problem, z, speed.at(1e-6))
+    assert near is not None and problem.split_singularity(near, speed.at(1e-6)) is None
+    with pytest.raises(AnalysisError, match="to the precision a linearization needs"):
+        linearize_steady(problem, problem.equilibrium(near), speed.at(1e-6))
+
+
 def test_compiled_pieces_equal_the_python_ones():
     """The bicycle's steady-motion pieces run as C (numeric/native.py) when a compiler is present: the same
     numbers as the generated Python to round-off, at random states."""

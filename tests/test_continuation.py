@@ -164,8 +164,37 @@ def test_a_point_without_eigenvalues_ends_the_branch_with_the_reason_not_the_swe
     assert branch.points[0].p == -1.0 and all(pt.p <= -0.25 for pt in branch.points)
     (where, why), = branch.undefined
     assert -0.25 < where < 0.0 and why == "singular at this point"
-    assert branch.points[-1].p > -0.35  # it got as close as the step allows
+    assert branch.points[-1].p > -0.25 - 1e-5  # it got as close as the smallest step allows
     assert kinds(branch) == []  # the fold lies beyond: not reported from a branch that never reached it
+
+
+def test_a_branch_approaches_a_point_without_eigenvalues_and_finds_the_events_before_it():
+    """The step that reaches a point without a linearization is retried shorter, so the branch ends close to that
+    point and the events between the last regular point and it are found (the bicycle's steady turns as v -> 0:
+    a real eigenvalue crossing zero at v = 0.045 lay inside a step ending at v = 0, where the split is singular).
+    Branch x = p, its eigenvalue p - 0.33 crosses zero at p = 0.33; no linearization below p = 0.3. The steps of
+    0.3 in arclength pass p = 0.364 and then fail at p = 0.152."""
+    def F(x, p):
+        return np.array([x[0] - p])
+
+    def Fx(x, p):
+        return np.array([[1.0]])
+
+    def Fp(x, p):
+        return np.array([-1.0])
+
+    def eig(x, p):
+        if p < 0.3:
+            raise Undefined("singular below 0.3")
+        return np.array([p - 0.33])
+
+    (branch,) = sweep_parameter(F, Fx, Fp, [(np.array([1.0]), 1.0)], 0.0, 1.0, eig, ds=0.3, ds_max=0.3)
+    assert kinds(branch) == ["zero_eigenvalue"]
+    assert branch.bifurcations[0].p == pytest.approx(0.33, abs=1e-8)
+    (where, why), = branch.undefined
+    assert 0.3 - 1e-5 < where < 0.3 and why == "singular below 0.3"
+    assert min(pt.p for pt in branch.points) == pytest.approx(0.3, abs=1e-5)
+    assert all(pt.stable == (pt.p < 0.33) for pt in branch.points)
 
 
 # -- 3. centrifuge-like fold -----------------------------------------------------------------------------

@@ -519,8 +519,14 @@ class _Continuation:
                 nxt = self.node(z1, t1) if not closed else start
                 found = self.detect(cur, nxt, len(branch.points) - 1)
             except Undefined as exc:
-                branch.undefined.append((float(z1[n]), str(exc)))
-                break
+                # the linearization is not defined at z1 or between (a singular split): approach the point by
+                # smaller steps, so that the events before it are found; the branch ends there at the smallest step
+                ds *= 0.5
+                closed = False
+                if ds < self.ds_min:
+                    branch.undefined.append((float(z1[n]), str(exc)))
+                    break
+                continue
             for _, bif in found:
                 branch.bifurcations.append(bif)
             branch.points.append(self.point(nxt) if not closed else branch.points[0])

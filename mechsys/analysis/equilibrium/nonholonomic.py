@@ -488,10 +488,11 @@ class NonholonomicProblem(EquilibriumProblem):
     def F(self, z: np.ndarray, p: np.ndarray) -> np.ndarray:
         return self.pieces.residual(*self.full_state(z), p)
 
-    def split_singularity(self, z: np.ndarray, p: np.ndarray) -> str | None:
+    def split_singularity(self, z: np.ndarray, p: np.ndarray, rtol: float = 1e-8) -> str | None:
         """The holonomic constraints do not determine the eliminated coordinates at z (their Jacobian in them
         loses rank: the bicycle's front contact frame when the wheel lies flat), or the velocity constraints the
-        dependent speeds; None when both are regular."""
+        dependent speeds; None when both are regular (smallest singular value of the block above rtol times the
+        largest entry of the constraint rows)."""
         v = self._at(z, p)
         n, m, ix = self.n, self.m, self._index
         dep = self.split.dependent
@@ -503,7 +504,7 @@ class NonholonomicProblem(EquilibriumProblem):
         for rows, names, text in blocks:
             sv = np.linalg.svd(rows[:, [ix[c] for c in names]], compute_uv=False)
             scale = max(float(np.max(np.abs(rows), initial=0.0)), 1e-300)
-            if sv.size and (not np.all(np.isfinite(sv)) or sv[-1] <= 1e-8 * scale):
+            if sv.size and (not np.all(np.isfinite(sv)) or sv[-1] <= rtol * scale):
                 return text
         return None
 
@@ -785,6 +786,12 @@ def _indices(names: list[str], split: Split) -> _Indices:
 _INDICES: dict[tuple, _Indices] = {}
 
 
+#: The smallest singular value, relative to the largest constraint entry, of the blocks that give the dependent
+#: speeds and the eliminated coordinates, below which a steady motion has no linearization. On the bicycle's
+#: steady turns as v -> 0 the eigenvalues' error is about 2e-8 of their size at 1e-6, 4e-5 at 2.5e-8.
+LINEARIZATION_RTOL = 1e-6
+
+
 def linearize_steady(problem: NonholonomicProblem, e: Equilibrium, p: np.ndarray | None = None) -> SteadyLinearization:
     """The linearization about a steady motion on the constraint manifold (module docstring)."""
     p = parameter_values(problem.model) if p is None else p
@@ -794,6 +801,15 @@ def linearize_steady(problem: NonholonomicProblem, e: Equilibrium, p: np.ndarray
     q, u, a, lam = problem.point(e)
     v = pieces.evaluate(q, u, a, lam, p)
     Eq, Eu, M, A = v["Eq"], v["Eu"], v["M"], v["A"]
+    # the test that drops a search's roots as coordinate singularities (drop_singular), with a margin: a branch
+    # followed towards such a point (the bicycle's steady turns as v -> 0) reaches blocks singular to round-off,
+    # which the solves below do not detect (their eigenvalues were 7e7 at the bicycle's v = 0), and before that,
+    # nearly singular ones, whose eigenvalues lose digits about as the square of the block's condition number
+    why = problem.split_singularity(problem.state(e), p, LINEARIZATION_RTOL)
+    if why is not None:
+        raise AnalysisError(f"{why} to the precision a linearization needs (a singular value below "
+                            f"{LINEARIZATION_RTOL:g} of the largest entry), so its linearization is not defined here: "
+                            "other independent speeds (--independent) may avoid this")
     ix = _indices(names, split)
     I, D, keep = ix.independent, ix.dependent, ix.keep
     # accelerations from the differentiated saddle-point system (one factorization for d/dq and d/du)
