@@ -308,6 +308,10 @@ class Program:
             fn.restype = None
             self._functions[name] = (fn, size)
 
+    def address(self, name: str) -> int:
+        """The machine address of function ``name`` (for compiled code that calls it: newton.c)."""
+        return ctypes.cast(self._functions[name][0], ctypes.c_void_p).value
+
     def __call__(self, name: str, args: np.ndarray) -> np.ndarray:
         fn, size = self._functions[name]
         a = np.ascontiguousarray(args, dtype=float)
@@ -343,3 +347,86 @@ def load_program(key: str, source: Optional[str], functions: dict[str, int], n_a
             return Program(path or built, functions, n_args)  # loaded before the temporary folder goes
     except (AnalysisError, OSError):
         return None
+
+
+# ----------------------------------------------------------------------------------------- the compiled Newton
+NEWTON = Path(__file__).with_name("newton.c")
+_LONG = np.dtype(ctypes.c_long)
+_newton_lib: dict[str, Optional[ctypes.CDLL]] = {}
+
+
+def newton_library() -> Optional[ctypes.CDLL]:
+    """newton.c's deflated Newton, built once per machine and source (-O2) and kept in the cache like the models'
+    libraries; None without a C compiler or when it does not build (the caller keeps its Python loop)."""
+    from mechsys.numeric import cache
+
+    cc = compiler()
+    if cc is None:
+        return None
+    if cc not in _newton_lib:
+        import hashlib
+
+        source = NEWTON.read_text(encoding="utf-8")
+        digest = hashlib.sha256(source.encode()).hexdigest()[:16]
+        key = f"newton-{sys.platform}-{platform.machine()}-{digest}"
+        path = cache.library(key)
+        lib = None
+        try:
+            if path is None:
+                with tempfile.TemporaryDirectory(prefix="mechsys-newton-") as tmp:
+                    built = Path(tmp) / f"{key}.so"
+                    build(source, built)
+                    path = cache.store_library(key, built)
+                    lib = ctypes.CDLL(str(path or built))  # loaded before the temporary folder goes
+            else:
+                lib = ctypes.CDLL(str(path))
+        except (AnalysisError, OSError):
+            lib = None
+        if lib is not None:
+            fn = lib.mechsys_deflated_newton
+            fn.argtypes = ([ctypes.c_void_p, ctypes.c_void_p, ctypes.c_int, ctypes.c_void_p, ctypes.c_void_p]
+                           + [ctypes.c_int] * 4 + [ctypes.c_void_p] * 3 + [ctypes.c_int, ctypes.c_void_p, ctypes.c_int]
+                           + [ctypes.c_void_p] * 2)
+            fn.restype = ctypes.c_int
+            lib.mechsys_newton_work.argtypes = [ctypes.c_int] * 5
+            lib.mechsys_newton_work.restype = ctypes.c_int
+        _newton_lib[cc] = lib
+    return _newton_lib[cc]
+
+
+class CompiledNewton:
+    """newton.c's loop over a Program's ``values`` and ``full`` functions for unknowns z placed in the argument
+    vector by position (args = base, args[pos] = z); the Jacobian is gathered from ``full``'s output followed by a
+    zero (index, sign: size x nz)."""
+
+    def __init__(self, lib: ctypes.CDLL, program: Program, values: str, full: str, base: np.ndarray,
+                 pos: np.ndarray, index: np.ndarray, sign: np.ndarray, is_angle: np.ndarray) -> None:
+        self._fn = lib.mechsys_deflated_newton
+        self._values, self._full = program.address(values), program.address(full)
+        self._out_size = program._functions[values][1]
+        self._full_size = program._functions[full][1]
+        self.base = np.ascontiguousarray(base, dtype=float)
+        if self.base.shape != (program.n_args,):
+            raise AnalysisError(f"compiled Newton: {self.base.size} arguments given, the program takes "
+                                f"{program.n_args}")
+        self.pos = np.ascontiguousarray(pos, dtype=_LONG)
+        self.size, self.nz = index.shape
+        if not (self.pos.shape == (self.nz,) and np.all((self.pos >= 0) & (self.pos < program.n_args))
+                and np.all((index >= 0) & (index <= self._full_size)) and self._out_size >= self.size):
+            raise AnalysisError("compiled Newton: positions or Jacobian indices out of range")
+        self.index = np.ascontiguousarray(index, dtype=_LONG)
+        self.sign = np.ascontiguousarray(sign, dtype=float)
+        self.is_angle = np.ascontiguousarray(is_angle, dtype=np.uint8)
+        self.work = np.empty(lib.mechsys_newton_work(self.size, self.nz, program.n_args, self._full_size,
+                                                     self._out_size))
+        self._program = program  # keeps the library loaded while the addresses are used
+
+    def __call__(self, z: np.ndarray, known: np.ndarray, max_iter: int) -> Optional[np.ndarray]:
+        """The iterate where the loop ended (converged or max_iter: to be polished), or None when it failed."""
+        z = np.array(z, dtype=float).reshape(self.nz)
+        known = np.ascontiguousarray(known, dtype=float).reshape(-1, self.nz)
+        ok = self._fn(self._values, self._full, self.base.size, self.base.ctypes.data, self.pos.ctypes.data,
+                      self.nz, self.size, self._full_size, self._out_size, self.index.ctypes.data,
+                      self.sign.ctypes.data, known.ctypes.data, known.shape[0], self.is_angle.ctypes.data,
+                      int(max_iter), z.ctypes.data, self.work.ctypes.data)
+        return z if ok else None

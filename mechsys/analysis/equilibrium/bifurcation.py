@@ -423,12 +423,16 @@ def _same_family(problem: EquilibriumProblem, a: Branch, b: Branch, at, memo: di
     value both reached, the same physical steady motion."""
     from mechsys.analysis.equilibrium.charts import same_motion
 
-    for pb in b.points:
-        pa = next((pt for pt in a.points if abs(pt.p - pb.p) <= 1e-12 * (1 + abs(pb.p))), None)
-        if pa is not None:
-            P = at(pb.p)
-            return same_motion(problem, problem.equilibrium(pa.x), problem.equilibrium(pb.x), P, memo)
-    return False
+    if not a.points or not b.points:
+        return False
+    # the first point of b (in order) at a parameter value a reached, and the first such point of a
+    pa_, pb_ = np.array([pt.p for pt in a.points]), np.array([pt.p for pt in b.points])
+    hit = np.abs(pb_[:, None] - pa_[None, :]) <= 1e-12 * (1 + np.abs(pb_))[:, None]
+    rows = np.flatnonzero(hit.any(axis=1))
+    if not rows.size:
+        return False
+    pb, pa = b.points[rows[0]], a.points[int(np.argmax(hit[rows[0]]))]
+    return same_motion(problem, problem.equilibrium(pa.x), problem.equilibrium(pb.x), at(pb.p), memo)
 
 
 def _merge_events(events: list[dict], angles: list[bool], step: float) -> list[dict]:

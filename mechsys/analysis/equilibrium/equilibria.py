@@ -259,6 +259,9 @@ class EquilibriumProblem:
             return np.zeros((len(self.residual_exprs), 0))
         return np.array(self._Fr(*z, *self.extra(), *p), dtype=float).reshape(len(self.residual_exprs), -1)
 
+    #: "compiled" when _newton runs numeric/newton.c for this problem (see compiled_newton), else "python"
+    newton_path = "python"
+
     def is_angle(self) -> np.ndarray:
         mask = self.__dict__.get("_angle_mask")
         if mask is None:
@@ -314,8 +317,14 @@ def _source_key(problem: EquilibriumProblem, what: str) -> str | None:
 # ----------------------------------------------------------------------------------------- solving
 def _newton(problem: EquilibriumProblem, z: np.ndarray, p: np.ndarray, roots: list[np.ndarray],
             max_iter: int = 60) -> np.ndarray | None:
-    """Deflated Newton (Farrell et al.): roots already found repel the iteration; backtracking on |G|."""
+    """Deflated Newton (Farrell et al.): roots already found repel the iteration; backtracking on |G|. A problem
+    with compiled pieces runs the same loop as compiled code (numeric/newton.c)."""
     n = len(z)
+    compiled = getattr(problem, "compiled_newton", None)
+    run = compiled(p) if compiled is not None else None
+    if run is not None:
+        end = run(z, np.array(roots, dtype=float).reshape(len(roots), n), max_iter)
+        return None if end is None else _polish(problem, problem.normalize(end), p)
 
     ang = np.flatnonzero(problem.is_angle())
     known = np.array(roots, dtype=float).reshape(len(roots), n)
@@ -544,7 +553,10 @@ def _disk_key(problem: EquilibriumProblem, key: tuple) -> str | None:
                "split": repr(getattr(problem, "split", None)),
                "initial": sorted((str(k), float(v)) for k, v in model.doc.initial.items()),
                "initial_rate": sorted((str(k), float(v)) for k, v in model.doc.initial_rate.items()),
-               "search": [key[0].hex(), *map(repr, key[1:])]}
+               "search": [key[0].hex(), *map(repr, key[1:])],
+               # the compiled Newton (numeric/newton.c) and the Python loop differ in round-off, so a start may
+               # end at another root: the search is kept per numeric path
+               "newton": problem.newton_path}
     return hashlib.sha256(json.dumps(payload).encode()).hexdigest()[:32]
 
 

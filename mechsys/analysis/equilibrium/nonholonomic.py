@@ -477,6 +477,26 @@ class NonholonomicProblem(EquilibriumProblem):
         keep = np.concatenate([self._layout[0], 3 * n + np.arange(m)])
         return index[:, keep], sign[:, keep]
 
+    @property
+    def newton_path(self) -> str:
+        return "compiled" if self.pieces._native is not None and native.newton_library() is not None else "python"
+
+    def compiled_newton(self, p: np.ndarray):
+        """The multistart's deflated Newton as compiled code over the pieces' program (numeric/newton.c) at the
+        parameters p and the current given values and rates; None without the compiled pieces or a compiler."""
+        program = self.pieces._native
+        lib = native.newton_library() if program is not None else None
+        if lib is None:
+            return None
+        n, m = self.n, self.m
+        nz = len(self.unknowns)
+        q, u, a, lam = self.full_state(np.zeros(nz))
+        base = np.concatenate([q, u, a, lam, np.asarray(p, dtype=float)])
+        pos = np.concatenate([self._layout[0], 3 * n + np.arange(m)])
+        index, sign = self._gather
+        return native.CompiledNewton(lib, program, "mechsys_values", "mechsys_full", base, pos, index, sign,
+                                     self.is_angle())
+
     def _columns(self, v: dict) -> np.ndarray:
         """dE/dz from dE/dq, dE/du and the blocks of a and lambda (one gather from the point's raw output)."""
         index, sign = self._gather
@@ -493,16 +513,27 @@ class NonholonomicProblem(EquilibriumProblem):
         loses rank: the bicycle's front contact frame when the wheel lies flat), or the velocity constraints the
         dependent speeds; None when both are regular (smallest singular value of the block above rtol times the
         largest entry of the constraint rows)."""
-        v = self._at(z, p)
+        return self.singular_block(self._at(z, p), rtol)
+
+    @cached_property
+    def _split_blocks(self) -> list[tuple[str, int, np.ndarray, str]]:
+        """(output, first row, columns, text) of the blocks that give the eliminated coordinates (rows of Phi in
+        dE/dq) and the dependent speeds (A), in the order split_singularity reports them."""
         n, m, ix = self.n, self.m, self._index
         dep = self.split.dependent
-        blocks = [(v["A"], dep, "the velocity constraints do not determine " + ", ".join(f"der({c})" for c in dep))]
+        blocks = [("A", 0, np.array([ix[c] for c in dep], dtype=int),
+                   "the velocity constraints do not determine " + ", ".join(f"der({c})" for c in dep))]
         if self.mh:
             elim = self.split.eliminated
-            blocks.insert(0, (v["Eq"][n + 2 * m:, :], elim,
+            blocks.insert(0, ("Eq", n + 2 * m, np.array([ix[c] for c in elim], dtype=int),
                               "the holonomic constraints do not determine " + ", ".join(elim)))
-        for rows, names, text in blocks:
-            sv = np.linalg.svd(rows[:, [ix[c] for c in names]], compute_uv=False)
+        return blocks
+
+    def singular_block(self, v: dict, rtol: float) -> str | None:
+        """split_singularity on a point's evaluated pieces ``v``."""
+        for key, first, cols, text in self._split_blocks:
+            rows = v[key][first:]
+            sv = np.linalg.svd(rows[:, cols], compute_uv=False)
             scale = max(float(np.max(np.abs(rows), initial=0.0)), 1e-300)
             if sv.size and (not np.all(np.isfinite(sv)) or sv[-1] <= rtol * scale):
                 return text
@@ -805,7 +836,7 @@ def linearize_steady(problem: NonholonomicProblem, e: Equilibrium, p: np.ndarray
     # followed towards such a point (the bicycle's steady turns as v -> 0) reaches blocks singular to round-off,
     # which the solves below do not detect (their eigenvalues were 7e7 at the bicycle's v = 0), and before that,
     # nearly singular ones, whose eigenvalues lose digits about as the square of the block's condition number
-    why = problem.split_singularity(problem.state(e), p, LINEARIZATION_RTOL)
+    why = problem.singular_block(v, LINEARIZATION_RTOL)
     if why is not None:
         raise AnalysisError(f"{why} to the precision a linearization needs (a singular value below "
                             f"{LINEARIZATION_RTOL:g} of the largest entry), so its linearization is not defined here: "
