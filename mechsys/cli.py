@@ -429,12 +429,13 @@ def equilibria(
             failed = disagreements(result, verifications)
             tables.append(rep.verification_table(result, verifications))
         bifurcations: list = []
+        sweep_notes = None
         if sweep_spec:
             from mechsys.analysis.equilibrium.bifurcation import plot_sweep, sweep
 
             (name, (start, stop, n)), = sweep_spec.items()
             swept = sweep(model, name, start, stop, int(n), boxes, options, result.problem)
-            bifurcations = swept.bifurcations
+            bifurcations, sweep_notes = swept.bifurcations, swept.notes
             tables += rep.sweep_tables(swept)
             if plot is not None:
                 write_figure(plot, lambda tmp: plot_sweep(swept, tmp, plot_coordinate))
@@ -459,7 +460,7 @@ def equilibria(
                 J = e.jacobian if reduced else None
                 tables += (rep.linearization_tables(lin, label, hurwitz, J) if linearize_
                            else rep.hurwitz_tables(lin, label, J))
-        payload = rep.equilibria_payload(result, bifurcations, verifications)
+        payload = rep.equilibria_payload(result, bifurcations, verifications, sweep_notes)
         if sweep_spec and fmt == TableFormat.csv:
             tables, payload = [t for t in tables if t.title.startswith("branches")], None
         if not failed:

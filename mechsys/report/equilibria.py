@@ -68,9 +68,9 @@ def verification_table(result: EquilibriaResult, verifications: list) -> Table:
 
 
 def equilibria_payload(result: EquilibriaResult, bifurcations: list | None = None,
-                       verifications: list | None = None) -> dict:
+                       verifications: list | None = None, sweep_notes: list[str] | None = None) -> dict:
     if verifications is not None:
-        return {**equilibria_payload(result, bifurcations),
+        return {**equilibria_payload(result, bifurcations, sweep_notes=sweep_notes),
                 "equilibria": [{**e.to_dict(), "verification": v.to_dict()}
                                for e, v in zip(result.equilibria, verifications)]}
     payload = {"equilibria": [e.to_dict() for e in result.equilibria], "bifurcations": bifurcations or [],
@@ -79,6 +79,8 @@ def equilibria_payload(result: EquilibriaResult, bifurcations: list | None = Non
                "search": result.search.to_dict() if result.search is not None else None}
     if result.exhaustive is not None:  # --exhaustive only
         payload["exhaustive"] = result.exhaustive.to_dict()
+    if sweep_notes is not None:  # --sweep only: what the text prints under the branches
+        payload["sweep_notes"] = list(sweep_notes)
     return payload
 
 

@@ -9,8 +9,8 @@ import numpy as np
 import sympy as sp
 
 from mechsys.analysis.equilibrium.continuation import Branch, Undefined, sweep_parameter
-from mechsys.analysis.equilibrium.equilibria import (EquilibriumProblem, drop_singular, make_problem, singular_note,
-                                                     solve_equilibria, wrap)
+from mechsys.analysis.equilibrium.equilibria import (EquilibriumProblem, drop_singular, is_isolated, make_problem,
+                                                     singular_note, solve_equilibria, wrap)
 from mechsys.analysis.equilibrium.stability import ZERO_RE, assess, pencil_eigenvalues
 from mechsys.errors import AnalysisError, InputError
 from mechsys.mechanics.model import MechanicalModel
@@ -229,11 +229,19 @@ def sweep(model: MechanicalModel, name: str, start: float, stop: float, points: 
         except (ValueError, ArithmeticError) as exc:  # e.g. sqrt of a negative parameter: math domain error
             return str(exc)
 
+    continua: list[float] = []  # sample values with roots that are not isolated
     for p, found in zip(samples, fork_map(multistart, len(samples))):  # independent: one worker each
         if isinstance(found, str):
             undefined.append(f"{name} = {p:g} ({found})")
         else:
-            starts += [(z, float(p)) for z in drop_singular(problem, found, par.at(p), singular)]
+            for z in drop_singular(problem, found, par.at(p), singular):
+                # a continuum of steady motions (a free heading): its Jacobian is singular everywhere, so the
+                # branch's tangent is not determined and every sign change of the determinant is noise (a
+                # Chaplygin sleigh's sweep reported 359 branch points and folds)
+                if is_isolated(problem, z, par.at(p)):
+                    starts.append((z, float(p)))
+                elif p not in continua:
+                    continua.append(float(p))
     span = hi - lo if hi > lo else 1.0
     step = span / max(points - 1, 1)
     if starts:
@@ -283,6 +291,10 @@ def sweep(model: MechanicalModel, name: str, start: float, stop: float, points: 
     result = SweepResult(name, names, angles, branches)
     if undefined:
         result.notes.append(f"the equations cannot be evaluated at {', '.join(undefined)}: no branch starts there")
+    if continua:
+        result.notes.append(f"the steady motions found at {name} = {', '.join(f'{v:g}' for v in continua)} are not "
+                            "isolated (singular Jacobian: a continuum, e.g. a free heading or a free rigid-body "
+                            "motion), so they are not continued: continuation follows isolated branches only")
     if singular:
         result.notes.append(f"starts at {name} = {', '.join(f'{v:g}' for v in np.linspace(lo, hi, 5))}: "
                             + singular_note(problem, singular, "continued"))

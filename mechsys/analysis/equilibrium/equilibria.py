@@ -741,7 +741,7 @@ def find_equilibria(model: MechanicalModel, search: dict[str, tuple[float, float
     else:
         plan = search_plan(problem, search, starts)
         roots = solve_equilibria(problem, p, search, starts, seed, plan)
-    from mechsys.analysis.equilibrium.charts import review, singularities
+    from mechsys.analysis.equilibrium.charts import review
 
     dropped: dict[str, list[np.ndarray]] = {}
     roots = drop_singular(problem, roots, p, dropped)
@@ -749,8 +749,7 @@ def find_equilibria(model: MechanicalModel, search: dict[str, tuple[float, float
     isolated = []
     family = None
     for z in roots:
-        sv = np.linalg.svd(_equilibrated(problem.J(z, p)), compute_uv=False)
-        if sv.size and sv[-1] <= 1e-9 * max(1.0, sv[0]) and not singularities(model, problem.equilibrium(z).coordinates, p):
+        if not is_isolated(problem, z, p):
             family = family if family is not None else z  # not isolated: one representative of the continuum
         else:
             isolated.append(z)  # (at a gimbal lock the chart, not the physics, makes roots a continuum: charts.py)
@@ -770,6 +769,16 @@ def find_equilibria(model: MechanicalModel, search: dict[str, tuple[float, float
     split = getattr(problem, "split", None)
     return EquilibriaResult(equilibria, message, problem.cyclic, dict(problem.fixed_rates), plan, exact,
                             split.text() if split is not None else "", problem)
+
+
+def is_isolated(problem: EquilibriumProblem, z: np.ndarray, p: np.ndarray) -> bool:
+    """The root z is isolated: its Jacobian (unit columns and rows) has full rank, or its rank loss is a gimbal
+    lock of the chart (charts.py), not a continuum of steady motions (a free heading, a free rigid-body motion)."""
+    from mechsys.analysis.equilibrium.charts import singularities
+
+    sv = np.linalg.svd(_equilibrated(problem.J(z, p)), compute_uv=False)
+    return not (sv.size and sv[-1] <= 1e-9 * max(1.0, sv[0])) or \
+        bool(singularities(problem.model, problem.equilibrium(z).coordinates, p))
 
 
 def _equilibrated(J: np.ndarray) -> np.ndarray:
