@@ -58,3 +58,26 @@ def test_a_sweep_does_not_continue_a_continuum_of_steady_motions():
     assert out["bifurcations"] == []
     (note,) = [n for n in out["sweep_notes"] if "not isolated" in n]
     assert "v = -2, -1, 0, 1, 2 are not isolated (singular Jacobian: a continuum" in note and "not continued" in note
+
+
+@pytest.mark.parametrize("a, v, verdict", [(0.4, 1.5, "asymptotically stable"), (-0.4, 1.5, "unstable")])
+def test_holding_the_heading_decides_the_verdict(a, v, verdict):
+    """--given psi: every shape coordinate given (it was refused: "nothing is left to solve for"), the dependent
+    rate and the multiplier still solved; the heading's family is set apart like the speed's, which leaves the
+    yaw eigenvalue alone and decides the verdict."""
+    result = runner.invoke(app, ["equilibria", str(SLEIGH), "--given", "psi", "--set", f"a={a}", "--set", f"v={v}",
+                                 "-f", "json"])
+    assert result.exit_code == 0, result.output
+    (e,) = json.loads(result.stdout)["equilibria"]
+    assert [complex(*x) for x in e["eigenvalues"]] == [pytest.approx(closed_form(a, v), abs=1e-9)]
+    assert e["stability"] == verdict and "along der(x), psi apart" in e["reason"]
+
+
+def test_with_the_heading_held_the_sweep_finds_the_one_crossing_at_rest():
+    """lambda = -m a v / (I_G + m a^2) changes sign at v = 0 and nowhere else: one zero_eigenvalue event there."""
+    result = runner.invoke(app, ["equilibria", str(SLEIGH), "--given", "psi", "--sweep", "v=-2:2:41", "-f", "json"])
+    assert result.exit_code == 0, result.output
+    out = json.loads(result.stdout)
+    (event,) = out["bifurcations"]
+    assert event["kind"] == "zero_eigenvalue" and event["value"] == pytest.approx(0.0, abs=1e-9)
+    assert out["sweep_notes"] == []

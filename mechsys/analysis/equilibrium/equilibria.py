@@ -460,7 +460,7 @@ class SearchReport:
                 parts.append(f"|{name}| log-spread over [{lo:.4g}, {hi:.4g}], both signs")
             else:
                 parts.append(f"{name} in [{lo:.4g}, {hi:.4g}]" + (" (--search)" if name in self.restricted else ""))
-        text = f"deflated Newton from {self.starts} starts: {', '.join(parts) or 'no unknowns'}"
+        text = f"deflated Newton from {self.starts} starts: {', '.join(parts) or 'no coordinate or rate to search'}"
         if self.outside:
             text += f"; roots beyond the start box (kept): {', '.join(self.outside)}"
         return text

@@ -417,9 +417,7 @@ class NonholonomicProblem(EquilibriumProblem):
         self.dependent_rates = [c for c in split.dependent if c in split.ignorable]
         self.lam = tuple(self.pieces.lam)
         self._index = {c: i for i, c in enumerate(names)}
-        if len(self.free) + len(self.rate_unknowns) == 0:
-            raise InputError("nothing is left to solve for: every shape coordinate is --given and no rate is freed "
-                             "with --solve")
+        # every shape coordinate may be --given: the multipliers (a velocity constraint at least) remain unknowns
 
     # the base class's symbolic residual is replaced by the compiled augmented one
     @cached_property
