@@ -490,10 +490,14 @@ class NonholonomicProblem(EquilibriumProblem):
         nz = len(self.unknowns)
         q, u, a, lam = self.full_state(np.zeros(nz))
         base = np.concatenate([q, u, a, lam, np.asarray(p, dtype=float)])
-        pos = np.concatenate([self._layout[0], 3 * n + np.arange(m)])
-        index, sign = self._gather
-        return native.CompiledNewton(lib, program, "mechsys_values", "mechsys_full", base, pos, index, sign,
-                                     self.is_angle())
+        last = self.__dict__.get("_compiled_newton")
+        if last is None or last[0] != base.tobytes():  # one per search: its starts share the given values and p
+            pos = np.concatenate([self._layout[0], 3 * n + np.arange(m)])
+            index, sign = self._gather
+            last = self.__dict__["_compiled_newton"] = (
+                base.tobytes(), native.CompiledNewton(lib, program, "mechsys_values", "mechsys_full", base, pos,
+                                                      index, sign, self.is_angle()))
+        return last[1]
 
     def _columns(self, v: dict) -> np.ndarray:
         """dE/dz from dE/dq, dE/du and the blocks of a and lambda (one gather from the point's raw output)."""
