@@ -390,6 +390,12 @@ def newton_library() -> Optional[ctypes.CDLL]:
             fn.restype = ctypes.c_int
             lib.mechsys_newton_work.argtypes = [ctypes.c_int] * 5
             lib.mechsys_newton_work.restype = ctypes.c_int
+            fn = lib.mechsys_corrector
+            fn.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_int, ctypes.c_int,
+                           ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p]
+            fn.restype = ctypes.c_int
+            lib.mechsys_corrector_work.argtypes = [ctypes.c_int] * 5
+            lib.mechsys_corrector_work.restype = ctypes.c_int
         _newton_lib[cc] = lib
     return _newton_lib[cc]
 
@@ -430,3 +436,61 @@ class CompiledNewton:
                       self.sign.ctypes.data, known.ctypes.data, known.shape[0], self.is_angle.ctypes.data,
                       int(max_iter), z.ctypes.data, self.work.ctypes.data)
         return z if ok else None
+
+
+class _CorrectorSetup(ctypes.Structure):
+    """newton.c's corrector_t, field by field."""
+    _fields_ = ([("values", ctypes.c_void_p), ("full", ctypes.c_void_p)]
+                + [(name, ctypes.c_int) for name in ("nargs", "nz", "size", "full_size", "out_size", "n",
+                                                     "jac_offset", "pfirst", "fp_params")]
+                + [("p_ref", ctypes.c_double), ("tol", ctypes.c_double)]
+                + [(name, ctypes.c_void_p) for name in ("base", "slope", "pos", "D", "s", "r", "rows", "jindex",
+                                                        "jsign")])
+
+
+class CompiledCorrector:
+    """newton.c's continuation corrector (mechsys_corrector) over a Program's ``values`` and ``full``: the sweep's
+    unknowns x = z_problem / D enter the arguments at ``pos`` scaled by D and the tracer's s; the arguments follow
+    the swept p affinely (args = base + (p - p_ref) slope); F is the rows ``rows`` of the first outputs; dE/dz is
+    gathered from ``full``'s output followed by a zero (index, sign: size x nz), dE/d(q, u) is the size x 2n block
+    of ``full``'s output at ``jac_offset``; ``fp_params``: E reads a parameter (from ``pfirst`` on) that follows p.
+    Called as _Tracer.newton: (z, iterations, the Jacobian [dF/dx s | dF/dp] at z) or None."""
+
+    def __init__(self, lib: ctypes.CDLL, program: Program, values: str, full: str, *, base: np.ndarray,
+                 slope: np.ndarray, p_ref: float, pos: np.ndarray, D: np.ndarray, s: np.ndarray, r: np.ndarray,
+                 rows: np.ndarray, index: np.ndarray, sign: np.ndarray, n: int, jac_offset: int, pfirst: int,
+                 fp_params: bool, tol: float) -> None:
+        self._fn = lib.mechsys_corrector
+        out_size, full_size = program._functions[values][1], program._functions[full][1]
+        size, nz = index.shape
+        arrays = {"base": base, "slope": slope, "D": D, "s": s, "r": r, "jsign": sign}
+        self._keep = {k: np.ascontiguousarray(v, dtype=float) for k, v in arrays.items()}
+        self._keep.update(pos=np.ascontiguousarray(pos, dtype=_LONG), rows=np.ascontiguousarray(rows, dtype=_LONG),
+                          jindex=np.ascontiguousarray(index, dtype=_LONG))
+        k = self._keep
+        nargs = program.n_args
+        shapes_ok = (k["base"].shape == k["slope"].shape == (nargs,) and k["pos"].shape == k["D"].shape
+                     == k["s"].shape == k["rows"].shape == (nz,) and k["r"].shape == (nz + 1,))
+        if not (shapes_ok and np.all((k["pos"] >= 0) & (k["pos"] < nargs)) and np.all((k["rows"] >= 0)
+                & (k["rows"] < size)) and np.all((k["jindex"] >= 0) & (k["jindex"] <= full_size))
+                and size <= out_size and 0 <= pfirst <= nargs and 2 * n <= nargs
+                and jac_offset + size * 2 * n <= full_size):
+            raise AnalysisError("compiled corrector: arguments, positions or indices out of range")
+        self.nz = nz
+        self._setup = _CorrectorSetup(program.address(values), program.address(full), nargs, nz, size, full_size,
+                                      out_size, n, jac_offset, pfirst, int(bool(fp_params)), float(p_ref),
+                                      float(tol), *(k[name].ctypes.data for name in
+                                                    ("base", "slope", "pos", "D", "s", "r", "rows", "jindex",
+                                                     "jsign")))
+        self._work = np.empty(lib.mechsys_corrector_work(nz, nargs, full_size, out_size, size))
+        self._iters = ctypes.c_int(0)
+        self._program = program  # keeps the library loaded while the addresses are used
+
+    def __call__(self, z_guess: np.ndarray, border: np.ndarray, max_iter: int,
+                 monotone: bool) -> Optional[tuple[np.ndarray, int, np.ndarray]]:
+        z = np.array(z_guess, dtype=float).reshape(self.nz + 1)
+        border = np.ascontiguousarray(border, dtype=float).reshape(self.nz + 1)
+        jac = np.empty((self.nz, self.nz + 1))
+        ok = self._fn(ctypes.addressof(self._setup), z.ctypes.data, border.ctypes.data, int(max_iter),
+                      int(bool(monotone)), jac.ctypes.data, ctypes.addressof(self._iters), self._work.ctypes.data)
+        return (z, self._iters.value, jac) if ok else None

@@ -265,3 +265,190 @@ int mechsys_deflated_newton(program_fn values, program_fn full, int nargs, const
     }
     return 1;
 }
+
+/* ---------------------------------------------------------------------------------------------------------------
+ * The continuation's corrector. A sweep's unknowns x (the problem's, divided by D) and the parameter p:
+ * args = base + (p - p_ref) slope, args[pos[k]] = D[k] (z[k] s[k]). F is the rows `rows` of the program's first
+ * outputs; dF/dx gathered as in the Newton above, times D and s; dF/dp = dE/d(q, u) . slope (the given rates that
+ * follow p) plus, when E reads a parameter that follows p, the central difference of E along the parameters'
+ * slope with the step of NonholonomicProblem.Fp_along.
+ */
+typedef struct {
+    program_fn values, full;
+    int nargs, nz, size, full_size, out_size, n, jac_offset, pfirst, fp_params;
+    double p_ref, tol;
+    const double *base, *slope;   /* nargs */
+    const long *pos;              /* nz */
+    const double *D, *s;          /* nz */
+    const double *r;              /* nz + 1: z -> tolerance units */
+    const long *rows;             /* nz */
+    const long *jindex;           /* size x nz */
+    const double *jsign;          /* size x nz */
+} corrector_t;
+
+typedef struct {
+    double *args, *args2, *out, *out2, *raw, *fp;
+} cwork_t;
+
+static void corrector_args(const corrector_t *C, const double *z, double *args) {
+    double dp = z[C->nz] - C->p_ref;
+    for (int j = 0; j < C->nargs; j++) args[j] = C->slope[j] != 0.0 ? C->base[j] + dp * C->slope[j] : C->base[j];
+    for (int k = 0; k < C->nz; k++) args[C->pos[k]] = C->D[k] * (z[k] * C->s[k]);
+}
+
+/* F(z) (nz) into f; 0 when not finite. Leaves the arguments in W->args. */
+static int corrector_residual(const corrector_t *C, cwork_t *W, const double *z, double *f) {
+    corrector_args(C, z, W->args);
+    C->values(W->args, W->out);
+    int ok = 1;
+    for (int i = 0; i < C->nz; i++) {
+        f[i] = W->out[C->rows[i]];
+        if (!isfinite(f[i])) ok = 0;
+    }
+    return ok;
+}
+
+/* [dF/dx s | dF/dp] (nz x (nz + 1), row major) at the arguments in W->args; 0 when not finite */
+static int corrector_jacobian(const corrector_t *C, cwork_t *W, double *A) {
+    int nz = C->nz, n = C->n;
+    C->full(W->args, W->raw);
+    W->raw[C->full_size] = 0.0;
+    for (int i = 0; i < C->size; i++) W->fp[i] = 0.0;
+    if (C->fp_params) {
+        double pn = 0.0, dn = 0.0;
+        for (int j = C->pfirst; j < C->nargs; j++) {
+            pn += W->args[j] * W->args[j];
+            dn += C->slope[j] * C->slope[j];
+        }
+        double h = 1e-6 * (sqrt(pn) > 1.0 ? sqrt(pn) : 1.0) / sqrt(dn);
+        memcpy(W->args2, W->args, sizeof(double) * C->nargs);
+        for (int j = C->pfirst; j < C->nargs; j++) W->args2[j] = W->args[j] + h * C->slope[j];
+        C->values(W->args2, W->out);
+        for (int j = C->pfirst; j < C->nargs; j++) W->args2[j] = W->args[j] - h * C->slope[j];
+        C->values(W->args2, W->out2);
+        for (int i = 0; i < C->size; i++) W->fp[i] = (W->out[i] - W->out2[i]) / (2.0 * h);
+    }
+    for (int j = 0; j < 2 * n; j++) {
+        if (C->slope[j] == 0.0) continue;
+        for (int i = 0; i < C->size; i++) W->fp[i] += W->raw[C->jac_offset + (size_t)i * 2 * n + j] * C->slope[j];
+    }
+    int ok = 1;
+    for (int i = 0; i < nz; i++) {
+        long row = C->rows[i];
+        for (int k = 0; k < nz; k++) {
+            long at = row * nz + k;
+            double v = W->raw[C->jindex[at]] * C->jsign[at] * C->D[k] * C->s[k];
+            A[i * (nz + 1) + k] = v;
+            if (!isfinite(v)) ok = 0;
+        }
+        A[i * (nz + 1) + nz] = W->fp[row];
+        if (!isfinite(W->fp[row])) ok = 0;
+    }
+    return ok;
+}
+
+/* x of the square system A x = b (A n x n, destroyed) by LU with partial pivoting; 0 when a pivot is exactly 0
+ * (numpy.linalg.solve raises there) */
+static int lu_solve(double *A, int n, const double *b, double *x) {
+    for (int i = 0; i < n; i++) x[i] = b[i];
+    for (int k = 0; k < n; k++) {
+        int piv = k;
+        double big = fabs(A[k * n + k]);
+        for (int i = k + 1; i < n; i++) {
+            if (fabs(A[i * n + k]) > big) { big = fabs(A[i * n + k]); piv = i; }
+        }
+        if (big == 0.0) return 0;
+        if (piv != k) {
+            for (int j = 0; j < n; j++) { double t = A[k * n + j]; A[k * n + j] = A[piv * n + j]; A[piv * n + j] = t; }
+            double t = x[k]; x[k] = x[piv]; x[piv] = t;
+        }
+        for (int i = k + 1; i < n; i++) {
+            double f = A[i * n + k] / A[k * n + k];
+            if (f == 0.0) continue;
+            for (int j = k + 1; j < n; j++) A[i * n + j] -= f * A[k * n + j];
+            x[i] -= f * x[k];
+        }
+    }
+    for (int k = n - 1; k >= 0; k--) {
+        double s = x[k];
+        for (int j = k + 1; j < n; j++) s -= A[k * n + j] * x[j];
+        x[k] = s / A[k * n + k];
+    }
+    return 1;
+}
+
+int mechsys_corrector_work(int nz, int nargs, int full_size, int out_size, int size) {
+    int m = nz + 1;
+    return 2 * nargs + 2 * out_size + full_size + 1 + size + 4 * m * m + 6 * m + 16;
+}
+
+/* Newton on [F(z); border . (z - z_guess)] = 0 from z_guess (in z, nz + 1), as _Tracer.newton: the step from
+ * the square bordered system (LU; numpy's minimum-norm least squares where LU meets a zero pivot or gives a
+ * non-finite step), convergence when max |dz r| <= tol (1 + max |z r|) and the residual then passes the test
+ * max |F| <= 1e3 tol (1 + max |A / r| (1 + max |z r|)); failure on a non-finite F, Jacobian or step, on
+ * max_iter, and (monotone) on a step more than twice the previous one. Returns 1 with z, the iterations in
+ * *iters and the Jacobian [dF/dx s | dF/dp] at z in jac (nz x (nz + 1)); 0 on failure. */
+int mechsys_corrector(const corrector_t *C, double *z, const double *border, int max_iter, int monotone,
+                      double *jac, int *iters, double *work) {
+    int nz = C->nz, m = nz + 1;
+    cwork_t W;
+    double *w = work;
+    W.args = w; w += C->nargs;
+    W.args2 = w; w += C->nargs;
+    W.out = w; w += C->out_size;
+    W.out2 = w; w += C->out_size;
+    W.raw = w; w += C->full_size + 1;
+    W.fp = w; w += C->size;
+    double *A = w; w += (size_t)m * m;
+    double *B = w; w += (size_t)m * m;
+    double *lwork = w; w += 2 * (size_t)m * m + 2 * m;
+    double *res = w; w += m;
+    double *dz = w; w += m;
+    double *guess = w; w += m;
+    memcpy(guess, z, sizeof(double) * m);
+    double prev = INFINITY;
+    for (int k = 1; k <= max_iter; k++) {
+        if (!corrector_residual(C, &W, z, res)) return 0;
+        if (!corrector_jacobian(C, &W, A)) return 0;
+        double b = 0.0;
+        for (int j = 0; j < m; j++) {
+            A[nz * m + j] = border[j];
+            b += border[j] * (z[j] - guess[j]);
+        }
+        res[nz] = b;
+        for (int i = 0; i < m; i++) res[i] = -res[i];
+        memcpy(B, A, sizeof(double) * m * m);
+        int solved = lu_solve(B, m, res, dz);
+        for (int i = 0; solved && i < m; i++) if (!isfinite(dz[i])) solved = 0;
+        if (!solved) {
+            memcpy(B, A, sizeof(double) * m * m);
+            lstsq(B, m, m, res, dz, lwork);
+            for (int i = 0; i < m; i++) if (!isfinite(dz[i])) return 0;
+        }
+        double step = 0.0, zmax = 0.0;
+        for (int j = 0; j < m; j++) {
+            z[j] += dz[j];
+            if (fabs(dz[j] * C->r[j]) > step) step = fabs(dz[j] * C->r[j]);
+            if (fabs(z[j] * C->r[j]) > zmax) zmax = fabs(z[j] * C->r[j]);
+        }
+        zmax += 1.0;
+        if (step <= C->tol * zmax) {
+            /* a least-squares step on a singular Jacobian can be tiny without solving F = 0: check F */
+            if (!corrector_residual(C, &W, z, res)) return 0;
+            double rmax = 0.0, amax = 0.0;
+            for (int i = 0; i < nz; i++) if (fabs(res[i]) > rmax) rmax = fabs(res[i]);
+            for (int i = 0; i < nz; i++)
+                for (int j = 0; j < m; j++) if (fabs(A[i * m + j] / C->r[j]) > amax) amax = fabs(A[i * m + j] / C->r[j]);
+            if (!(rmax <= 1e3 * C->tol * (1.0 + amax * zmax))) return 0;
+            *iters = k;
+            /* the Jacobian at z (the arguments are in place): the tangent and det of the point read it next */
+            if (jac != NULL && !corrector_jacobian(C, &W, jac)) {
+                for (int i = 0; i < nz * m; i++) jac[i] = NAN;
+            }
+            return 1;
+        }
+        if (monotone && k >= 2 && step > 2.0 * prev) return 0;
+        prev = step;
+    }
+    return 0;
+}

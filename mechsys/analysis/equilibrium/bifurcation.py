@@ -99,6 +99,7 @@ class SweptParameter:
     dpvec: Callable[[float, np.ndarray], np.ndarray]
     rates: Callable[[float, np.ndarray], np.ndarray]   # the given rates, problem.fixed_rates order
     drates: Callable[[float, np.ndarray], np.ndarray]
+    affine: bool = False  # the parameter vector and the given rates are affine in p (dpvec, drates constant)
 
     def at(self, p: float) -> np.ndarray:
         last = self.__dict__.get("_last")
@@ -138,6 +139,7 @@ def swept_parameter(problem: EquilibriumProblem, name: str) -> SweptParameter:
     value = compile_exprs(exprs, syms) if exprs else None
     slope = [sp.diff(sp.sympify(e).xreplace(full), base) for e in exprs]
     dvalue = compile_exprs(slope, syms) if any(d != 0 for d in slope) else None
+    affine = all(sp.sympify(d).is_number for d in [*slope, *(sp.diff(full[s], base) for s in syms)])
     memo: dict[float, np.ndarray] = {}
 
     def pvec(p: float) -> np.ndarray:
@@ -148,7 +150,8 @@ def swept_parameter(problem: EquilibriumProblem, name: str) -> SweptParameter:
 
     return SweptParameter(name, problem, pvec, lambda p, P: sens(P),
                           lambda p, P: np.array(value(*P) if value else [], dtype=float),
-                          lambda p, P: np.array(dvalue(*P), dtype=float) if dvalue else np.zeros(len(exprs)))
+                          lambda p, P: np.array(dvalue(*P), dtype=float) if dvalue else np.zeros(len(exprs)),
+                          affine)
 
 
 def _rate_parameter(problem: EquilibriumProblem, coord: str) -> SweptParameter:
@@ -177,7 +180,19 @@ def _rate_parameter(problem: EquilibriumProblem, coord: str) -> SweptParameter:
         out[k] = p
         return out
 
-    return SweptParameter(name, problem, lambda p: P, lambda p, P: np.zeros(len(P)), given, lambda p, P: unit)
+    return SweptParameter(name, problem, lambda p: P, lambda p, P: np.zeros(len(P)), given, lambda p, P: unit, True)
+
+
+def _compiled_corrector(problem: EquilibriumProblem, par: SweptParameter, starts: list, D: np.ndarray,
+                        rows: list[int] | slice):
+    """The continuation's compiled corrector for F, Fx and Fp of ``sweep`` (a factory, see continuation.Compiled),
+    where the problem has one and the swept p moves its arguments affinely; None otherwise (the Python loop)."""
+    make = getattr(problem, "compiled_corrector", None)
+    if make is None or not par.affine or not starts:
+        return None
+    p_ref = float(starts[0][1])
+    P = par.at(p_ref)
+    return make(p_ref, P, par.dpvec(p_ref, P), par.drates(p_ref, P), D, rows)
 
 
 def sweep(model: MechanicalModel, name: str, start: float, stop: float, points: int = 101,
@@ -269,7 +284,8 @@ def sweep(model: MechanicalModel, name: str, start: float, stop: float, points: 
         # the point verdicts below read the linearizations the continuation's eigenvalues computed (in workers)
         share = ((problem.take_linearizations, problem.give_linearizations)
                  if hasattr(problem, "take_linearizations") else None)
-        branches = sweep_parameter(F, Fx, Fp, starts, lo, hi, eig, skipped=skipped, share=share, ds=step / 2,
+        branches = sweep_parameter(F, Fx, Fp, starts, lo, hi, eig, skipped=skipped, share=share,
+                                   compiled=_compiled_corrector(problem, par, starts, D, rows), ds=step / 2,
                                    ds_max=min(step, 0.2 * max(span, 1.0)), tol_re=ZERO_RE * 10,
                                    max_steps=max(2000, 20 * points), x_scale=arc,
                                    tol_scale=None if arc is None else np.ones(len(arc))) if starts else []

@@ -10,6 +10,10 @@ from scipy.optimize import brentq, linear_sum_assignment
 from mechsys.numeric.parallel import Share, Workers
 
 ArrayFn = Callable[[np.ndarray, float], np.ndarray]
+# a compiled corrector for the tracer's scales (s, r) and tolerance: called as _Tracer.newton(z_guess, border,
+# max_iter, monotone), it returns (z, iterations, the Jacobian [Fx s | Fp] at z) or None (numeric/native.py)
+Corrector = Callable[[np.ndarray, np.ndarray, int, bool], "tuple[np.ndarray, int, np.ndarray] | None"]
+Compiled = Callable[[np.ndarray, np.ndarray, float], Corrector]
 
 _MAX_CORRECTOR_ITER = 10     # Newton iterations per corrector before the step is halved
 _MAX_START_ITER = 50         # Newton iterations for the start point at fixed p
@@ -89,13 +93,14 @@ class _Tracer:
     are still solved to the full tolerance."""
 
     def __init__(self, F: ArrayFn, Fx: ArrayFn, Fp: ArrayFn, eig: ArrayFn, n: int, x_scale, tol: float,
-                 tol_re: float, tol_scale=None) -> None:
+                 tol_re: float, tol_scale=None, compiled: Compiled | None = None) -> None:
         self.F, self.Fx, self.Fp, self.eig = F, Fx, Fp, eig
         self.n = n
         self.s = _scale(x_scale, n, "x_scale")
         # z -> tolerance units: (x / tol_scale, p)
         self.r = np.append(self.s / (_scale(tol_scale, n, "tol_scale") if tol_scale is not None else self.s), 1.0)
         self.tol, self.tol_re = tol, tol_re
+        self.compiled = compiled(self.s, self.r, tol) if compiled is not None else None
 
     # -- conversions and evaluations --------------------------------------------------------------
     def z_of(self, x: np.ndarray, p: float) -> np.ndarray:
@@ -131,7 +136,14 @@ class _Tracer:
     # -- Newton on the bordered system -------------------------------------------------------------
     def newton(self, z_guess: np.ndarray, border: np.ndarray, max_iter: int = _MAX_CORRECTOR_ITER,
                monotone: bool = True) -> tuple[np.ndarray, int] | None:
-        """Solve [F(z); border.(z - z_guess)] = 0 from z_guess; (z, iterations) or None."""
+        """Solve [F(z); border.(z - z_guess)] = 0 from z_guess; (z, iterations) or None. The compiled corrector,
+        when there is one, takes the same steps and keeps the Jacobian at z for the point's tangent."""
+        if self.compiled is not None:
+            res = self.compiled(z_guess, border, max_iter, monotone)
+            if res is None:
+                return None
+            self.__dict__["_last_jac"] = (res[0].tobytes(), res[2])
+            return res[0], res[1]
         z = z_guess.copy()
         prev = np.inf
         for k in range(1, max_iter + 1):
@@ -547,7 +559,7 @@ class _Continuation:
 
 def _setup(F: ArrayFn, Fx: ArrayFn, Fp: ArrayFn, x0, p0: float, p_min: float, p_max: float, eig: ArrayFn,
            ds: float, ds_min: float, ds_max: float, max_steps: int, tol: float, tol_re: float,
-           x_scale, tol_scale=None) -> tuple[_Continuation, np.ndarray]:
+           x_scale, tol_scale=None, compiled: Compiled | None = None) -> tuple[_Continuation, np.ndarray]:
     if not p_min < p_max:
         raise ValueError(f"continuation: need p_min < p_max, got [{p_min}, {p_max}]")
     if not (0.0 < ds_min <= ds_max and ds > 0.0):
@@ -555,7 +567,7 @@ def _setup(F: ArrayFn, Fx: ArrayFn, Fp: ArrayFn, x0, p0: float, p_min: float, p_
     if not p_min <= p0 <= p_max:
         raise ValueError(f"continuation: start parameter p0={p0} is outside [{p_min}, {p_max}]")
     x0 = np.atleast_1d(np.asarray(x0, dtype=float)).ravel()
-    tr = _Tracer(F, Fx, Fp, eig, len(x0), x_scale, tol, tol_re, tol_scale)
+    tr = _Tracer(F, Fx, Fp, eig, len(x0), x_scale, tol, tol_re, tol_scale, compiled)
     z = tr.correct_fixed_p(tr.z_of(x0, p0), max_iter=_MAX_START_ITER, monotone=False)
     if z is None:
         try:
@@ -638,7 +650,7 @@ def _on_branch(cont: _Continuation, branch: Branch, z: np.ndarray) -> bool:
 
 def sweep_parameter(F: ArrayFn, Fx: ArrayFn, Fp: ArrayFn, starts: list[tuple[np.ndarray, float]], p_min: float,
                     p_max: float, eig: ArrayFn, skipped: list[tuple[float, str]] | None = None,
-                    share: Share | None = None, **kw: Any) -> list[Branch]:
+                    share: Share | None = None, compiled: Compiled | None = None, **kw: Any) -> list[Branch]:
     """Trace each start both ways (direction -1 and +1) and merge the two halves into one branch along the arc.
 
     The merged points run from the end of the direction -1 half, through the start, to the end of the +1 half;
@@ -646,7 +658,8 @@ def sweep_parameter(F: ArrayFn, Fx: ArrayFn, Fp: ArrayFn, starts: list[tuple[np.
     closed branch is traced once. ``kw`` are the keyword options of ``continue_branch`` (``direction`` ignored).
     A start where ``eig`` raises Undefined is not traced; its (p, reason) is appended to ``skipped``. The starts
     are traced in forked workers where more than one process is available (numeric/parallel.py: the branches are
-    those of the serial loop); ``share`` carries state of ``eig`` back from them (e.g. a memo).
+    those of the serial loop); ``share`` carries state of ``eig`` back from them (e.g. a memo). ``compiled`` makes
+    a compiled corrector for a tracer (``Compiled``), which then replaces the Python Newton loop.
     """
     kw = dict(kw)
     kw.pop("direction", None)
@@ -658,7 +671,7 @@ def sweep_parameter(F: ArrayFn, Fx: ArrayFn, Fp: ArrayFn, starts: list[tuple[np.
     defaults = dict(ds=0.05, ds_min=1e-6, ds_max=0.5, max_steps=2000, tol=1e-10, tol_re=1e-9, x_scale=None,
                     tol_scale=None)
     defaults.update(opts)
-    setups = [_setup(F, Fx, Fp, x0, p0, p_min, p_max, eig, **defaults) for x0, p0 in starts]
+    setups = [_setup(F, Fx, Fp, x0, p0, p_min, p_max, eig, **defaults, compiled=compiled) for x0, p0 in starts]
 
     def half(j: int) -> tuple[Branch, bool] | str:
         """Start j // 2 traced forward (j even) or backward: (half branch, closed), or the reason eig is

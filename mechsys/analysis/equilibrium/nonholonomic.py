@@ -499,6 +499,39 @@ class NonholonomicProblem(EquilibriumProblem):
                                                       index, sign, self.is_angle()))
         return last[1]
 
+    def compiled_corrector(self, p_ref: float, P: np.ndarray, dP: np.ndarray, drates: np.ndarray, D: np.ndarray,
+                           rows: list[int] | slice):
+        """The continuation's corrector as compiled code (numeric/newton.c) for a sweep's F(x, p) = E(D x)[rows]
+        whose parameters P and given rates move affinely with p (slopes dP and drates, fixed_rates order; the given
+        rates now are those at p_ref): a factory (s, r, tol) -> corrector (continuation.Compiled); None without
+        the compiled pieces or a compiler."""
+        program = self.pieces._native
+        lib = native.newton_library() if program is not None else None
+        if lib is None:
+            return None
+        n, m, ix = self.n, self.m, self._index
+        nz = len(self.unknowns)
+        base = np.concatenate([*self.full_state(np.zeros(nz)), np.asarray(P, dtype=float)])
+        slope = np.zeros(len(base))
+        for c, d in zip(self.fixed_rates, drates):
+            slope[n + ix[c]] = d
+        dP = np.asarray(dP, dtype=float)
+        slope[3 * n + m:] = dP
+        pos = np.concatenate([self._layout[0], 3 * n + np.arange(m)])
+        slope[pos] = 0.0
+        index, sign = self._gather
+        fp_params = bool(np.linalg.norm(dP) > 0 and np.any(dP[self._parameters_read]))  # Fp_along's test
+        rows = np.arange(self.pieces.size)[rows]
+        if len(rows) != nz:  # not a square system: the Python loop's least squares
+            return None
+
+        def make(s: np.ndarray, r: np.ndarray, tol: float) -> native.CompiledCorrector:
+            return native.CompiledCorrector(lib, program, "mechsys_values", "mechsys_full", base=base, slope=slope,
+                                            p_ref=p_ref, pos=pos, D=D, s=s, r=r, rows=rows, index=index,
+                                            sign=sign, n=n, jac_offset=self.pieces._outputs, pfirst=3 * n + m,
+                                            fp_params=fp_params, tol=tol)
+        return make
+
     def _columns(self, v: dict) -> np.ndarray:
         """dE/dz from dE/dq, dE/du and the blocks of a and lambda (one gather from the point's raw output)."""
         index, sign = self._gather
@@ -535,9 +568,14 @@ class NonholonomicProblem(EquilibriumProblem):
         """split_singularity on a point's evaluated pieces ``v``."""
         for key, first, cols, text in self._split_blocks:
             rows = v[key][first:]
-            sv = np.linalg.svd(rows[:, cols], compute_uv=False)
-            scale = max(float(np.max(np.abs(rows), initial=0.0)), 1e-300)
-            if sv.size and (not np.all(np.isfinite(sv)) or sv[-1] <= rtol * scale):
+            block = rows[:, cols]
+            # a single entry (one holonomic constraint, one eliminated coordinate) is its own singular value
+            smallest = abs(float(block[0, 0])) if block.shape == (1, 1) else \
+                np.linalg.svd(block, compute_uv=False)[-1] if block.size else None
+            if smallest is None:
+                continue
+            scale = max(float(np.abs(rows).max(initial=0.0)), 1e-300)
+            if not np.isfinite(smallest) or smallest <= rtol * scale:
                 return text
         return None
 
@@ -920,9 +958,23 @@ def _deflate(problem: NonholonomicProblem, e: Equilibrium, p: np.ndarray, Jw: np
             undeflated.append(name)
     if not tangents:
         return [], undeflated, Jw
-    T = np.column_stack(tangents)
-    Q, _ = np.linalg.qr(np.hstack([T, np.eye(Jw.shape[0])]))
-    basis = np.hstack([T, Q[:, len(tangents):Jw.shape[0]]])
-    B = np.linalg.solve(basis, Jw @ basis)
-    k = len(tangents)
-    return families, undeflated, B[k:, k:]
+    # in the basis [T, C], C an orthonormal basis of T's orthogonal complement, the rows of the inverse that belong
+    # to C are C^T (C^T T = 0, C^T C = I): the block left once T's columns vanish is C^T Jw C
+    C = _complement(np.column_stack(tangents))
+    return families, undeflated, C.T @ Jw @ C
+
+
+def _complement(T: np.ndarray) -> np.ndarray:
+    """An orthonormal basis of the orthogonal complement of the columns of T (n x k, independent): the last n - k
+    columns of the product of the Householder reflections that make T upper triangular."""
+    n, k = T.shape
+    Q, A = np.eye(n), np.array(T, dtype=float)
+    for j in range(k):
+        w = A[j:, j].copy()
+        w[0] += np.copysign(np.linalg.norm(w), w[0])
+        beta = float(w @ w)
+        if beta == 0.0:
+            continue
+        A[j:, j:] -= np.outer(w, (2.0 / beta) * (w @ A[j:, j:]))
+        Q[:, j:] -= np.outer(Q[:, j:] @ w, (2.0 / beta) * w)
+    return Q[:, k:]
