@@ -1,3 +1,3 @@
-from mechsys.cli import main
+from mechsys.cli import entry
 
-main()
+entry()
