@@ -340,3 +340,33 @@ def test_the_physical_state_code_is_cached_and_equals_a_fresh_one(tmp_path, monk
     model = mechsys.load(path)
     cache.store(cache.model_key(model, "chart-state"), {"source": "import os\nos.system('true')"})
     assert np.array_equal(state(), fresh) and generated == [1, 1]
+
+
+@pytest.mark.parametrize("name", ["bicycle", "gyrostabilizer", "indicator", "rolling_disk", "four_bar"])
+def test_the_physical_state_velocities_are_the_time_derivative_of_the_positions(name):
+    """charts._state_fn (the state two roots are compared by) takes its velocities from the link-by-link
+    propagation: they must be d/dt of its positions, here by a central difference along (u, 1) in (q, t)."""
+    import mechsys
+    from mechsys.analysis.equilibrium.charts import _state_fn
+
+    model = mechsys.load(ROOT / "systems" / f"{name}.yaml")
+    fn = _state_fn(model)
+    n = len(model.q)
+    p = mechsys.numeric.parameters.parameter_values(model)
+    rng = np.random.default_rng(3)
+    bodies = [(b.particle) for b, *_ in model._body_kinematics]
+    checked = 0
+    for _ in range(3):
+        q, u, t = rng.uniform(-1, 1, n), rng.uniform(-1, 1, n), float(rng.uniform(0, 1))
+        h = 1e-6
+        plus = np.array(fn(*(q + h * u), *u, *p, t + h), dtype=float)
+        minus = np.array(fn(*(q - h * u), *u, *p, t - h), dtype=float)
+        state = np.array(fn(*q, *u, *p, t), dtype=float)
+        k = 0
+        for particle in bodies:
+            r_dot = (plus[k:k + 3] - minus[k:k + 3]) / (2 * h)
+            assert np.allclose(state[k + 3:k + 6], r_dot, rtol=1e-6, atol=1e-6 * (1 + np.max(np.abs(r_dot))))
+            k += 6 if particle else 6 + 9 + 3
+            checked += 1
+        assert k == len(state)
+    assert checked >= 3

@@ -159,8 +159,9 @@ def _state_fn(model):
             import sympy as sp
 
             parts = []
-            for body, r, _v, w, frame in model._body_kinematics:
-                parts += list(r) + list(model.velocity(r))
+            for body, r, v, w, frame in model._body_kinematics:
+                # the velocity propagated link by link, mapped to ground axes (differentiating r: 4x the time)
+                parts += list(r) + list(frame.home_R * v)
                 if not body.particle:
                     parts += list(frame.R) + list(frame.R * w)
             args = list(model.q) + list(model.u) + list(model.parameter_symbols) + [model.t]
