@@ -116,3 +116,26 @@ def test_console_script_runs_without_traceback():
     proc = subprocess.run([sys.executable, "-m", "mechsys", "info", str(CENTRIFUGE), "-f", "markdown"],
                           capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0 and "| mobility" in proc.stdout and not proc.stderr
+
+
+def test_only_the_executable_freezes_what_the_model_loaded(monkeypatch):
+    """`mechsys` (cli.entry) moves what is alive once the model is loaded out of the garbage collector's view
+    (gc.freeze: its full collections and the exit then skip sympy and the model); main() called in a long process
+    (these tests, an embedding program) must not, or every command would pin its garbage for good."""
+    import gc
+
+    from mechsys import cli
+
+    gc.unfreeze()
+    try:
+        cli.load_model(CENTRIFUGE, None)
+        assert gc.get_freeze_count() == 0
+        monkeypatch.setattr(cli, "_ONE_SHOT", True)
+        cli.load_model(CENTRIFUGE, None)
+        assert gc.get_freeze_count() > 0
+    finally:
+        gc.unfreeze()
+    out = subprocess.run([sys.executable, "-c", "import sys, gc; from mechsys import cli; "
+                          "sys.argv = ['mechsys', 'info', sys.argv[1]]; cli.entry()", str(CENTRIFUGE)],
+                         capture_output=True, text=True)
+    assert out.returncode == 0 and "centrifuge" in out.stdout.lower()
