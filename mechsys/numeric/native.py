@@ -396,6 +396,11 @@ def newton_library() -> Optional[ctypes.CDLL]:
             fn.restype = ctypes.c_int
             lib.mechsys_corrector_work.argtypes = [ctypes.c_int] * 5
             lib.mechsys_corrector_work.restype = ctypes.c_int
+            fn = lib.mechsys_linearize
+            fn.argtypes = [ctypes.c_void_p] * 10
+            fn.restype = ctypes.c_int
+            lib.mechsys_linearize_work.argtypes = [ctypes.c_int] * 5
+            lib.mechsys_linearize_work.restype = ctypes.c_int
         _newton_lib[cc] = lib
     return _newton_lib[cc]
 
@@ -494,3 +499,71 @@ class CompiledCorrector:
         ok = self._fn(ctypes.addressof(self._setup), z.ctypes.data, border.ctypes.data, int(max_iter),
                       int(bool(monotone)), jac.ctypes.data, ctypes.addressof(self._iters), self._work.ctypes.data)
         return (z, self._iters.value, jac) if ok else None
+
+
+class _LinearizationSetup(ctypes.Structure):
+    """newton.c's lin_t, field by field."""
+    _fields_ = ([(name, ctypes.c_int) for name in ("n", "m", "mh", "size", "jac", "nI", "nkeep", "nxi", "nign", "nz",
+                                                   "nfam", "nt", "hfirst")]
+                + [("rtol", ctypes.c_double)]
+                + [(name, ctypes.c_void_p) for name in ("I", "D", "keep", "elim", "rows_q", "cols_all", "cols_ign",
+                                                        "jindex", "jsign", "rhs", "tsrc", "tone")])
+
+
+class CompiledLinearization:
+    """newton.c's linearization about a steady motion (mechsys_linearize: analysis/equilibrium/nonholonomic.py's
+    linearize_steady and _deflate, the same steps) from a point's evaluated pieces. ``sizes``: n, m, mh, size,
+    jac (where dE/d(q, u) starts in the output), hfirst (the holonomic rows' first row); ``lists``: the index lists
+    I, D, keep, elim, rows_q, cols_all, cols_ign; ``index``, ``sign``: dE/dz gathered from the output (size x nz);
+    ``rhs``: the families' columns (nfam x size, indices into the output); ``tsrc``, ``tone``: how each family's
+    direction is read from its dz. Called with the output followed by a zero: (status, Jw, Mr, Kf, Cf, deflated,
+    which families were deflated); status 0 ok, else newton.c's code and the arrays None."""
+
+    _LISTS = ("I", "D", "keep", "elim", "rows_q", "cols_all", "cols_ign")
+
+    def __init__(self, lib: ctypes.CDLL, *, sizes: dict, lists: dict, index: np.ndarray, sign: np.ndarray,
+                 rhs: np.ndarray, tsrc: np.ndarray, tone: np.ndarray, rtol: float, full_size: int) -> None:
+        self._fn = lib.mechsys_linearize
+        n, m, size = sizes["n"], sizes["m"], sizes["size"]
+        k = {name: np.ascontiguousarray(lists[name], dtype=np.intc) for name in self._LISTS}
+        k.update(jindex=np.ascontiguousarray(index, dtype=_LONG), jsign=np.ascontiguousarray(sign, dtype=float),
+                 rhs=np.ascontiguousarray(rhs, dtype=_LONG).reshape(-1, size),
+                 tsrc=np.ascontiguousarray(tsrc, dtype=np.intc), tone=np.ascontiguousarray(tone, dtype=np.intc))
+        nz = k["jindex"].shape[1] if k["jindex"].ndim == 2 else 0
+        nfam, nxi, nI = len(k["tone"]), len(k["rows_q"]), len(k["I"])
+        nt = nxi + nI
+        ok = (k["jindex"].shape == (size, nz) and k["rhs"].shape == (nfam, size) and k["tsrc"].shape == (nfam, nt)
+              and len(k["D"]) == m and len(k["elim"]) == sizes["mh"] and len(k["cols_all"]) == nxi
+              and all(np.all((k[name] >= 0) & (k[name] < n)) for name in ("I", "D", "keep", "elim", "rows_q"))
+              and all(np.all((k[name] >= 0) & (k[name] < len(k["keep"]))) for name in ("cols_all", "cols_ign"))
+              and np.all((k["jindex"] >= 0) & (k["jindex"] <= full_size))
+              and np.all((k["rhs"] >= 0) & (k["rhs"] <= full_size))
+              and np.all((k["tsrc"] >= -1) & (k["tsrc"] < nz)) and np.all((k["tone"] >= -1) & (k["tone"] < nt))
+              and sizes["jac"] + size * 2 * n <= full_size and sizes["hfirst"] + sizes["mh"] <= size)
+        if not ok:
+            raise AnalysisError("compiled linearization: index lists out of range")
+        self._keep = k
+        self.nt, self.nxi, self.nI, self.nfam = nt, nxi, nI, nfam
+        self._full_size = full_size
+        self._setup = _LinearizationSetup(n, m, sizes["mh"], size, sizes["jac"], nI, len(k["keep"]), nxi,
+                                          len(k["cols_ign"]), nz, nfam, nt, sizes["hfirst"], float(rtol),
+                                          *(k[name].ctypes.data for name in (*self._LISTS, "jindex", "jsign", "rhs",
+                                                                             "tsrc", "tone")))
+        self._work = np.empty(lib.mechsys_linearize_work(n, m, size, nz, nt))
+        self._k = ctypes.c_int(0)
+
+    def __call__(self, raw: np.ndarray):
+        raw = np.ascontiguousarray(raw, dtype=float)
+        if raw.shape != (self._full_size + 1,):
+            raise AnalysisError(f"compiled linearization: {raw.size} numbers given, it reads {self._full_size + 1}")
+        nt, nxi, nI = self.nt, self.nxi, self.nI
+        Jw, Mr, Kf, Cf = np.empty((nt, nt)), np.empty((nI, nI)), np.empty((nI, nxi)), np.empty((nI, nI))
+        deflated = np.empty(nt * nt)
+        flags = np.zeros(max(self.nfam, 1), dtype=np.intc)
+        status = self._fn(ctypes.addressof(self._setup), raw.ctypes.data, Jw.ctypes.data, Mr.ctypes.data,
+                          Kf.ctypes.data, Cf.ctypes.data, deflated.ctypes.data, flags.ctypes.data,
+                          ctypes.addressof(self._k), self._work.ctypes.data)
+        if status:
+            return status, None, None, None, None, None, None
+        nd = nt - self._k.value
+        return 0, Jw, Mr, Kf, Cf, deflated[:nd * nd].reshape(nd, nd), flags[:self.nfam].astype(bool)

@@ -347,39 +347,64 @@ static int corrector_jacobian(const corrector_t *C, cwork_t *W, double *A) {
     return ok;
 }
 
-/* x of the square system A x = b (A n x n, destroyed) by LU with partial pivoting; 0 when a pivot is exactly 0
- * (numpy.linalg.solve raises there) */
-static int lu_solve(double *A, int n, const double *b, double *x) {
-    for (int i = 0; i < n; i++) x[i] = b[i];
+/* LU with partial pivoting of A (n x n, in place, row swaps in piv); 0 when a pivot is exactly 0 (where
+ * numpy.linalg.solve raises) */
+static int lu_factor(double *A, int n, int *piv) {
     for (int k = 0; k < n; k++) {
-        int piv = k;
+        int p = k;
         double big = fabs(A[k * n + k]);
         for (int i = k + 1; i < n; i++) {
-            if (fabs(A[i * n + k]) > big) { big = fabs(A[i * n + k]); piv = i; }
+            if (fabs(A[i * n + k]) > big) { big = fabs(A[i * n + k]); p = i; }
         }
+        piv[k] = p;
         if (big == 0.0) return 0;
-        if (piv != k) {
-            for (int j = 0; j < n; j++) { double t = A[k * n + j]; A[k * n + j] = A[piv * n + j]; A[piv * n + j] = t; }
-            double t = x[k]; x[k] = x[piv]; x[piv] = t;
+        if (p != k) {
+            for (int j = 0; j < n; j++) { double t = A[k * n + j]; A[k * n + j] = A[p * n + j]; A[p * n + j] = t; }
         }
         for (int i = k + 1; i < n; i++) {
-            double f = A[i * n + k] / A[k * n + k];
+            double f = A[i * n + k] /= A[k * n + k];
             if (f == 0.0) continue;
             for (int j = k + 1; j < n; j++) A[i * n + j] -= f * A[k * n + j];
-            x[i] -= f * x[k];
+        }
+    }
+    return 1;
+}
+
+/* B (n x nrhs, row major) := A^-1 B from lu_factor's A and piv */
+static void lu_apply(const double *LU, int n, const int *piv, double *B, int nrhs) {
+    for (int k = 0; k < n; k++) {  /* the row swaps of the whole factorization first: P B */
+        if (piv[k] != k) {
+            for (int j = 0; j < nrhs; j++) {
+                double t = B[k * nrhs + j]; B[k * nrhs + j] = B[piv[k] * nrhs + j]; B[piv[k] * nrhs + j] = t;
+            }
+        }
+    }
+    for (int k = 0; k < n; k++) {
+        for (int i = k + 1; i < n; i++) {
+            double f = LU[i * n + k];
+            if (f != 0.0) for (int j = 0; j < nrhs; j++) B[i * nrhs + j] -= f * B[k * nrhs + j];
         }
     }
     for (int k = n - 1; k >= 0; k--) {
-        double s = x[k];
-        for (int j = k + 1; j < n; j++) s -= A[k * n + j] * x[j];
-        x[k] = s / A[k * n + k];
+        for (int j = 0; j < nrhs; j++) {
+            double t = B[k * nrhs + j];
+            for (int i = k + 1; i < n; i++) t -= LU[k * n + i] * B[i * nrhs + j];
+            B[k * nrhs + j] = t / LU[k * n + k];
+        }
     }
+}
+
+/* x of the square system A x = b (A n x n, destroyed); 0 when a pivot is exactly 0 */
+static int lu_solve(double *A, int n, const double *b, double *x, int *piv) {
+    if (!lu_factor(A, n, piv)) return 0;
+    for (int i = 0; i < n; i++) x[i] = b[i];
+    lu_apply(A, n, piv, x, 1);
     return 1;
 }
 
 int mechsys_corrector_work(int nz, int nargs, int full_size, int out_size, int size) {
     int m = nz + 1;
-    return 2 * nargs + 2 * out_size + full_size + 1 + size + 4 * m * m + 6 * m + 16;
+    return 2 * nargs + 2 * out_size + full_size + 1 + size + 4 * m * m + 7 * m + 16;
 }
 
 /* Newton on [F(z); border . (z - z_guess)] = 0 from z_guess (in z, nz + 1), as _Tracer.newton: the step from
@@ -405,6 +430,7 @@ int mechsys_corrector(const corrector_t *C, double *z, const double *border, int
     double *res = w; w += m;
     double *dz = w; w += m;
     double *guess = w; w += m;
+    int *piv = (int *)w; w += m;  /* m ints in m doubles */
     memcpy(guess, z, sizeof(double) * m);
     double prev = INFINITY;
     for (int k = 1; k <= max_iter; k++) {
@@ -418,7 +444,7 @@ int mechsys_corrector(const corrector_t *C, double *z, const double *border, int
         res[nz] = b;
         for (int i = 0; i < m; i++) res[i] = -res[i];
         memcpy(B, A, sizeof(double) * m * m);
-        int solved = lu_solve(B, m, res, dz);
+        int solved = lu_solve(B, m, res, dz, piv);
         for (int i = 0; solved && i < m; i++) if (!isfinite(dz[i])) solved = 0;
         if (!solved) {
             memcpy(B, A, sizeof(double) * m * m);
@@ -449,6 +475,252 @@ int mechsys_corrector(const corrector_t *C, double *z, const double *border, int
         }
         if (monotone && k >= 2 && step > 2.0 * prev) return 0;
         prev = step;
+    }
+    return 0;
+}
+
+/* ---------------------------------------------------------------------------------------------------------------
+ * The linearization about a steady motion on the constraint manifold (analysis/equilibrium/nonholonomic.py,
+ * linearize_steady and _deflate, the same steps) from a point's evaluated pieces `raw` (the program's full output
+ * followed by a zero): E (size) at 0, M (n x n) at size, A (m x n) at size + n n, dE/d(q, u) (size x 2n) at jac.
+ * Index lists are ints; every matrix is row major.
+ */
+typedef struct {
+    int n, m, mh, size, jac, nI, nkeep, nxi, nign, nz, nfam, nt;
+    int hfirst;           /* first row of the holonomic constraints in dE/dq (when mh) */
+    double rtol;          /* the singular-value tests' (LINEARIZATION_RTOL) */
+    const int *I, *D, *keep, *elim, *rows_q, *cols_all, *cols_ign;
+    const long *jindex;   /* size x nz: dE/dz of the steady-motion unknowns, gathered from raw (times jsign) */
+    const double *jsign;
+    const long *rhs;      /* nfam x size: raw index of the family's column of dE/du (a rate) or dE/dq */
+    const int *tsrc;      /* nfam x nt: the unknown (index into z) each entry of the family's direction reads, -1: 0 */
+    const int *tone;      /* nfam: the entry set to 1 (along the given rate or coordinate itself), -1: none */
+} lin_t;
+
+/* The smallest singular value of the square block (rows first.., columns cols) of the matrix at raw + offset
+ * (row stride `stride`), and in *scale the largest entry of those rows over their first `width` columns */
+static double smallest_singular(const double *raw, int offset, int stride, int width, int first, int nrows,
+                                const int *cols, double *scale, double *work) {
+    double big = 0.0;
+    for (int r = 0; r < nrows; r++)
+        for (int j = 0; j < width; j++) {
+            double a = fabs(raw[offset + (size_t)(first + r) * stride + j]);
+            if (a > big) big = a;
+        }
+    *scale = big;
+    if (nrows == 1) return fabs(raw[offset + (size_t)first * stride + cols[0]]);
+    double *B = work, *V = B + nrows * nrows, *sv = V + nrows * nrows;
+    for (int r = 0; r < nrows; r++)
+        for (int c = 0; c < nrows; c++) B[r * nrows + c] = raw[offset + (size_t)(first + r) * stride + cols[c]];
+    jacobi_svd(B, nrows, nrows, V, sv);
+    double lo = INFINITY;
+    for (int c = 0; c < nrows; c++) if (sv[c] < lo) lo = sv[c];
+    return lo;
+}
+
+int mechsys_linearize_work(int n, int m, int size, int nz, int nt) {
+    int N = n + m, big = N > nz ? N : nz;
+    if (size > big) big = size;
+    return 4 * N * N + 2 * N * 2 * n + 8 * n * n + 4 * size * nz + 2 * size + 6 * nt * nt + 6 * nt + 6 * big * big + 64;
+}
+
+/* Returns 0 with Jw (nt x nt, nt = nxi + nI), Mr (nI x nI), Kf (nI x nxi), Cf (nI x nI), the deflated block
+ * (nt - k square, k families deflated) and deflated[f] per family; 1 + b when singular-value test b failed (b: 0
+ * the holonomic block, 1 the velocity constraints'), 10 when a solve meets a zero pivot, 11 when the reduced
+ * equations depend on an ignorable coordinate, 12 when a number is not finite. *k_out: the families deflated. */
+int mechsys_linearize(const lin_t *L, const double *raw, double *Jw, double *Mr, double *Kf, double *Cf,
+                      double *deflated, int *fam_deflated, int *k_out, double *work) {
+    int n = L->n, m = L->m, mh = L->mh, N = n + m, nI = L->nI, nk = L->nkeep, nxi = L->nxi, nt = L->nt;
+    const double *M = raw + L->size, *A = raw + L->size + n * n;
+    for (int i = 0; i < L->jac + L->size * 2 * n; i++) if (!isfinite(raw[i])) return 12;
+    double *w = work;
+    int *piv = (int *)w; w += N;
+    /* the singular-value tests (NonholonomicProblem.singular_block), in its order */
+    for (int b = 0; b < 2; b++) {
+        if ((b == 0 && !mh) || (b == 1 && !m)) continue;
+        double scale, lo;
+        if (b == 0) lo = smallest_singular(raw, L->jac, 2 * n, n, L->hfirst, mh, L->elim, &scale, w);
+        else lo = smallest_singular(raw, L->size + n * n, n, n, 0, m, L->D, &scale, w);
+        if (scale < 1e-300) scale = 1e-300;
+        if (!isfinite(lo) || lo <= L->rtol * scale) return 1 + b;
+    }
+    /* P = -K^-1 [Eq; Eu] rows 0..n+m (only the first n rows kept), K = [[M, -A^T], [A, 0]] */
+    double *K = w; w += N * N;
+    double *P = w; w += N * 2 * n;
+    for (int i = 0; i < N * N; i++) K[i] = 0.0;
+    for (int i = 0; i < n; i++) for (int j = 0; j < n; j++) K[i * N + j] = M[i * n + j];
+    for (int i = 0; i < m; i++) for (int j = 0; j < n; j++) { K[j * N + n + i] = -A[i * n + j]; K[(n + i) * N + j] = A[i * n + j]; }
+    for (int i = 0; i < N; i++) for (int j = 0; j < 2 * n; j++) P[i * 2 * n + j] = raw[L->jac + (size_t)i * 2 * n + j];
+    if (!lu_factor(K, N, piv)) return 10;
+    lu_apply(K, N, piv, P, 2 * n);
+    for (int i = 0; i < n * 2 * n; i++) P[i] = -P[i];   /* Pq = P[:, :n], Pu = P[:, n:] (rows < n) */
+    /* Uq (n x n), UI (n x nI): rates per coordinate and per independent speed */
+    double *Uq = w; w += n * n;
+    double *UI = w; w += n * nI;
+    for (int i = 0; i < n * n; i++) Uq[i] = 0.0;
+    for (int i = 0; i < n * nI; i++) UI[i] = 0.0;
+    for (int c = 0; c < nI; c++) UI[L->I[c] * nI + c] = 1.0;
+    if (m) {
+        double *AD = w; w += m * m;
+        double *W = w; w += m * (n + nI);
+        for (int i = 0; i < m; i++) {
+            for (int c = 0; c < m; c++) AD[i * m + c] = A[i * n + L->D[c]];
+            for (int j = 0; j < n; j++) W[i * (n + nI) + j] = raw[L->jac + (size_t)(n + m + i) * 2 * n + j];
+            for (int c = 0; c < nI; c++) W[i * (n + nI) + n + c] = A[i * n + L->I[c]];
+        }
+        if (!lu_factor(AD, m, piv)) return 10;
+        lu_apply(AD, m, piv, W, n + nI);
+        for (int i = 0; i < m; i++) {
+            for (int j = 0; j < n; j++) Uq[L->D[i] * n + j] = -W[i * (n + nI) + j];
+            for (int c = 0; c < nI; c++) UI[L->D[i] * nI + c] = -W[i * (n + nI) + n + c];
+        }
+    }
+    /* Qm (n x nkeep): coordinates per kept coordinate, the eliminated ones from the holonomic constraints */
+    double *Qm = w; w += n * nk;
+    for (int i = 0; i < n * nk; i++) Qm[i] = 0.0;
+    for (int c = 0; c < nk; c++) Qm[L->keep[c] * nk + c] = 1.0;
+    if (mh) {
+        double *Pe = w; w += mh * mh;
+        double *Pk = w; w += mh * nk;
+        int first = L->hfirst;
+        for (int i = 0; i < mh; i++) {
+            for (int c = 0; c < mh; c++) Pe[i * mh + c] = raw[L->jac + (size_t)(first + i) * 2 * n + L->elim[c]];
+            for (int c = 0; c < nk; c++) Pk[i * nk + c] = raw[L->jac + (size_t)(first + i) * 2 * n + L->keep[c]];
+        }
+        if (!lu_factor(Pe, mh, piv)) return 10;
+        lu_apply(Pe, mh, piv, Pk, nk);
+        for (int i = 0; i < mh; i++) for (int c = 0; c < nk; c++) Qm[L->elim[i] * nk + c] = -Pk[i * nk + c];
+    }
+    /* dq_dxi = Uq Qm (n x nkeep); acc_q = (Pq Qm + Pu dq_dxi) (n x nkeep); PuUI = Pu UI (n x nI) */
+    double *dq = w; w += n * nk;
+    double *acc = w; w += n * nk;
+    double *PuUI = w; w += n * nI;
+    for (int i = 0; i < n; i++) for (int c = 0; c < nk; c++) {
+        double t = 0.0;
+        for (int j = 0; j < n; j++) t += Uq[i * n + j] * Qm[j * nk + c];
+        dq[i * nk + c] = t;
+    }
+    for (int i = 0; i < n; i++) {
+        for (int c = 0; c < nk; c++) {
+            double t = 0.0, u = 0.0;
+            for (int j = 0; j < n; j++) { t += P[i * 2 * n + j] * Qm[j * nk + c]; u += P[i * 2 * n + n + j] * dq[j * nk + c]; }
+            acc[i * nk + c] = t + u;
+        }
+        for (int c = 0; c < nI; c++) {
+            double t = 0.0;
+            for (int j = 0; j < n; j++) t += P[i * 2 * n + n + j] * UI[j * nI + c];
+            PuUI[i * nI + c] = t;
+        }
+    }
+    /* Jw = [[dq_dxi[rows_q][:, cols_all], UI[rows_q]], [acc_q[I][:, cols_all], PuUI[I]]] */
+    for (int r = 0; r < nxi; r++) {
+        for (int c = 0; c < nxi; c++) Jw[r * nt + c] = dq[L->rows_q[r] * nk + L->cols_all[c]];
+        for (int c = 0; c < nI; c++) Jw[r * nt + nxi + c] = UI[L->rows_q[r] * nI + c];
+    }
+    for (int r = 0; r < nI; r++) {
+        for (int c = 0; c < nxi; c++) Jw[(nxi + r) * nt + c] = acc[L->I[r] * nk + L->cols_all[c]];
+        for (int c = 0; c < nI; c++) Jw[(nxi + r) * nt + nxi + c] = PuUI[L->I[r] * nI + c];
+    }
+    double scale = 1.0;
+    for (int i = 0; i < nt * nt; i++) { if (!isfinite(Jw[i])) return 12; if (fabs(Jw[i]) > scale) scale = fabs(Jw[i]); }
+    /* the ignorable coordinates must not enter: their columns vanish (a check of the split) */
+    for (int c = 0; c < L->nign; c++) {
+        for (int r = 0; r < nxi; r++) if (fabs(dq[L->rows_q[r] * nk + L->cols_ign[c]]) > 1e-7 * scale) return 11;
+        for (int r = 0; r < nI; r++) if (fabs(acc[L->I[r] * nk + L->cols_ign[c]]) > 1e-7 * scale) return 11;
+    }
+    /* Mr = UI^T M UI; Kf = -Mr Jw[nxi:, :nxi]; Cf = -Mr Jw[nxi:, nxi:] */
+    double *MU = w; w += n * nI;
+    for (int i = 0; i < n; i++) for (int c = 0; c < nI; c++) {
+        double t = 0.0;
+        for (int j = 0; j < n; j++) t += M[i * n + j] * UI[j * nI + c];
+        MU[i * nI + c] = t;
+    }
+    for (int a = 0; a < nI; a++) for (int c = 0; c < nI; c++) {
+        double t = 0.0;
+        for (int i = 0; i < n; i++) t += UI[i * nI + a] * MU[i * nI + c];
+        Mr[a * nI + c] = t;
+    }
+    for (int a = 0; a < nI; a++) for (int c = 0; c < nt; c++) {
+        double t = 0.0;
+        for (int b = 0; b < nI; b++) t += Mr[a * nI + b] * Jw[(nxi + b) * nt + c];
+        if (c < nxi) Kf[a * nxi + c] = -t; else Cf[a * nI + c - nxi] = -t;
+    }
+    /* _deflate: the direction of each family from the steady-motion equations, J_z dz = -column */
+    int nz = L->nz, k = 0;
+    double *Jz = w; w += L->size * nz;
+    double *Jc = w; w += L->size * nz;
+    double *col = w; w += L->size;
+    double *dz = w; w += nz > 0 ? nz : 1;
+    double *T = w; w += nt * (L->nfam > 0 ? L->nfam : 1);
+    double *t = w; w += nt;
+    double *lwork = w; w += 2 * (size_t)(L->size > nz ? L->size : nz) * (L->size > nz ? L->size : nz) + 2 * (L->size + nz);
+    for (int i = 0; i < L->size * nz; i++) Jz[i] = raw[L->jindex[i]] * L->jsign[i];
+    for (int f = 0; f < L->nfam; f++) {
+        for (int i = 0; i < L->size; i++) col[i] = -raw[L->rhs[f * L->size + i]];
+        if (nz) {
+            memcpy(Jc, Jz, sizeof(double) * L->size * nz);
+            lstsq(Jc, L->size, nz, col, dz, lwork);
+        }
+        for (int e = 0; e < nt; e++) {
+            int src = L->tsrc[f * nt + e];
+            t[e] = src >= 0 ? dz[src] : 0.0;
+        }
+        if (L->tone[f] >= 0) t[L->tone[f]] = 1.0;
+        double jt = 0.0, tn = 0.0;
+        for (int r = 0; r < nt; r++) {
+            double s = 0.0;
+            for (int c = 0; c < nt; c++) s += Jw[r * nt + c] * t[c];
+            jt += s * s;
+            tn += t[r] * t[r];
+        }
+        jt = sqrt(jt); tn = sqrt(tn);
+        fam_deflated[f] = jt <= 1e-8 * scale * (tn > 1e-300 ? tn : 1e-300);
+        if (fam_deflated[f]) {
+            for (int e = 0; e < nt; e++) T[e * L->nfam + k] = t[e] / tn;  /* column k of T (nt x nfam) */
+            k++;
+        }
+    }
+    *k_out = k;
+    /* C: the last nt - k columns of the Householder product that makes T upper triangular; deflated = C^T Jw C */
+    double *Q = w; w += nt * nt;
+    double *R = w; w += nt * (k > 0 ? k : 1);
+    double *v = w; w += nt;
+    double *JC = w; w += nt * nt;
+    for (int i = 0; i < nt * nt; i++) Q[i] = 0.0;
+    for (int i = 0; i < nt; i++) Q[i * nt + i] = 1.0;
+    for (int i = 0; i < nt; i++) for (int c = 0; c < k; c++) R[i * k + c] = T[i * L->nfam + c];
+    for (int j = 0; j < k; j++) {
+        double nrm = 0.0;
+        for (int i = j; i < nt; i++) nrm += R[i * k + j] * R[i * k + j];
+        nrm = sqrt(nrm);
+        for (int i = j; i < nt; i++) v[i] = R[i * k + j];
+        v[j] += copysign(nrm, v[j]);
+        double beta = 0.0;
+        for (int i = j; i < nt; i++) beta += v[i] * v[i];
+        if (beta == 0.0) continue;
+        for (int c = j; c < k; c++) {
+            double d = 0.0;
+            for (int i = j; i < nt; i++) d += v[i] * R[i * k + c];
+            d *= 2.0 / beta;
+            for (int i = j; i < nt; i++) R[i * k + c] -= d * v[i];
+        }
+        for (int r = 0; r < nt; r++) {
+            double d = 0.0;
+            for (int i = j; i < nt; i++) d += Q[r * nt + i] * v[i];
+            d *= 2.0 / beta;
+            for (int i = j; i < nt; i++) Q[r * nt + i] -= d * v[i];
+        }
+    }
+    int nd = nt - k;
+    for (int r = 0; r < nt; r++) for (int c = 0; c < nd; c++) {
+        double s = 0.0;
+        for (int i = 0; i < nt; i++) s += Jw[r * nt + i] * Q[i * nt + k + c];
+        JC[r * nd + c] = s;
+    }
+    for (int a = 0; a < nd; a++) for (int c = 0; c < nd; c++) {
+        double s = 0.0;
+        for (int r = 0; r < nt; r++) s += Q[r * nt + k + a] * JC[r * nd + c];
+        deflated[a * nd + c] = s;
     }
     return 0;
 }

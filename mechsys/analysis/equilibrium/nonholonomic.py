@@ -532,6 +532,40 @@ class NonholonomicProblem(EquilibriumProblem):
                                             fp_params=fp_params, tol=tol)
         return make
 
+    @cached_property
+    def families(self) -> list[str]:
+        """The families of steady motions a linearization deflates: der(rate) of each given rate, then each --given
+        coordinate (the order of SteadyLinearization.families and undeflated)."""
+        return [f"der({c})" for c in self.fixed_rates] + list(self.given)
+
+    @cached_property
+    def compiled_linearization(self) -> native.CompiledLinearization | None:
+        """linearize_steady's numeric steps as compiled code (numeric/newton.c) for this split and these families;
+        None without the compiled pieces or a compiler, or with no state to linearize (numpy then)."""
+        program = self.pieces._native
+        lib = native.newton_library() if program is not None else None
+        pieces, split, n, m = self.pieces, self.split, self.n, self.m
+        ix = _indices(pieces.names, split)
+        xi, nu = [pieces.names[i] for i in ix.rows_q], list(split.independent)
+        if lib is None or not xi + nu:
+            return None
+        index, sign = self._gather
+        # a family's direction t = (dq[xi], du[nu]) is read from its dz where z places the entries (full_state)
+        src = {int(w): k for k, w in enumerate(self._layout[0])}
+        tsrc = [src.get(self._index[x], -1) for x in xi] + [src.get(n + self._index[c], -1) for c in nu]
+        column = pieces._outputs + np.arange(pieces.size) * 2 * n  # row starts of dE/d(q, u) in the output
+        rhs = [column + n + self._index[c] for c in self.fixed_rates] + [column + self._index[c] for c in self.given]
+        tone = ([len(xi) + nu.index(c) if c in nu else -1 for c in self.fixed_rates]
+                + [xi.index(c) if c in xi else -1 for c in self.given])
+        lists = {"I": ix.independent, "D": ix.dependent, "keep": ix.keep, "elim": ix.eliminated,
+                 "rows_q": ix.rows_q, "cols_all": ix.cols_all, "cols_ign": ix.cols_ign}
+        sizes = {"n": n, "m": m, "mh": self.mh, "size": pieces.size, "jac": pieces._outputs, "hfirst": n + 2 * m}
+        return native.CompiledLinearization(lib, sizes=sizes, lists=lists, index=index, sign=sign,
+                                            rhs=np.array(rhs, dtype=int).reshape(-1, pieces.size),
+                                            tsrc=np.array([tsrc] * len(rhs), dtype=int).reshape(len(rhs), -1),
+                                            tone=np.array(tone, dtype=int), rtol=LINEARIZATION_RTOL,
+                                            full_size=pieces._full_size)
+
     def _columns(self, v: dict) -> np.ndarray:
         """dE/dz from dE/dq, dE/du and the blocks of a and lambda (one gather from the point's raw output)."""
         index, sign = self._gather
@@ -863,14 +897,54 @@ _INDICES: dict[tuple, _Indices] = {}
 LINEARIZATION_RTOL = 1e-6
 
 
+_SINGULAR_SOLVE = ("the constraints or the saddle-point system are singular at this steady motion: choose other "
+                   "independent speeds with --independent")
+_IGNORABLE_ENTERS = ("the reduced equations depend on an ignorable coordinate at this steady motion (internal check of "
+                     "the split failed)")
+
+
+def _not_linearizable(why: str) -> AnalysisError:
+    return AnalysisError(f"{why} to the precision a linearization needs (a singular value below "
+                         f"{LINEARIZATION_RTOL:g} of the largest entry), so its linearization is not defined here: "
+                         "other independent speeds (--independent) may avoid this")
+
+
 def linearize_steady(problem: NonholonomicProblem, e: Equilibrium, p: np.ndarray | None = None) -> SteadyLinearization:
-    """The linearization about a steady motion on the constraint manifold (module docstring)."""
+    """The linearization about a steady motion on the constraint manifold (module docstring): compiled
+    (numeric/newton.c, the same steps) with the compiled pieces, else in numpy."""
     p = parameter_values(problem.model) if p is None else p
     pieces, split = problem.pieces, problem.split
     names = pieces.names
+    v = pieces.evaluate(*problem.point(e), p)
+    run = problem.compiled_linearization
+    if run is not None:
+        status, Jw, Mr, Kf, Cf, deflated, flags = run(v["raw"])
+        if status in (1, 2):  # the singular-value test of a block (singular_block's order)
+            raise _not_linearizable(problem._split_blocks[0 if status == 1 else -1][3])
+        if status:
+            raise AnalysisError({10: _SINGULAR_SOLVE, 11: _IGNORABLE_ENTERS}.get(
+                status, "the equations are not finite at this steady motion"))
+        given = problem.families
+        families = [g for g, f in zip(given, flags) if f]
+        undeflated = [g for g, f in zip(given, flags) if not f]
+    else:
+        Jw, Mr, Kf, Cf = _reduced(problem, v)
+        families, undeflated, deflated = _deflate(problem, e, p, Jw, [names[i] for i in _indices(names, split).rows_q],
+                                                  split.independent)
+    vals = np.linalg.eigvals(deflated) if deflated.size else np.zeros(0, complex)
+    vals = vals[np.lexsort((vals.imag, vals.real))]
+    ix = _indices(names, split)
+    nxi = len(ix.rows_q)
+    return SteadyLinearization([names[i] for i in ix.rows_q], list(split.independent), Jw, deflated, vals,
+                               Mr, Cf, Kf, Jw[:nxi, :nxi], Jw[:nxi, nxi:], list(split.ignorable), families,
+                               undeflated)
+
+
+def _reduced(problem: NonholonomicProblem, v: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Jw, Mr, Kf, Cf of the linearization from a point's evaluated pieces ``v`` (numpy; newton.c's
+    mechsys_linearize takes the same steps)."""
+    pieces, split = problem.pieces, problem.split
     n, m, mh = pieces.n, pieces.m, pieces.mh
-    q, u, a, lam = problem.point(e)
-    v = pieces.evaluate(q, u, a, lam, p)
     Eq, Eu, M, A = v["Eq"], v["Eu"], v["M"], v["A"]
     # the test that drops a search's roots as coordinate singularities (drop_singular), with a margin: a branch
     # followed towards such a point (the bicycle's steady turns as v -> 0) reaches blocks singular to round-off,
@@ -878,10 +952,8 @@ def linearize_steady(problem: NonholonomicProblem, e: Equilibrium, p: np.ndarray
     # nearly singular ones, whose eigenvalues lose digits about as the square of the block's condition number
     why = problem.singular_block(v, LINEARIZATION_RTOL)
     if why is not None:
-        raise AnalysisError(f"{why} to the precision a linearization needs (a singular value below "
-                            f"{LINEARIZATION_RTOL:g} of the largest entry), so its linearization is not defined here: "
-                            "other independent speeds (--independent) may avoid this")
-    ix = _indices(names, split)
+        raise _not_linearizable(why)
+    ix = _indices(pieces.names, split)
     I, D, keep = ix.independent, ix.dependent, ix.keep
     # accelerations from the differentiated saddle-point system (one factorization for d/dq and d/du)
     K = np.zeros((n + m, n + m))
@@ -902,8 +974,7 @@ def linearize_steady(problem: NonholonomicProblem, e: Equilibrium, p: np.ndarray
             Phi_q = Eq[n + 2 * m:]
             Qm[ix.eliminated] = -np.linalg.solve(Phi_q[:, ix.eliminated], Phi_q[:, keep])
     except np.linalg.LinAlgError:
-        raise AnalysisError("the constraints or the saddle-point system are singular at this steady motion: "
-                            "choose other independent speeds with --independent") from None
+        raise AnalysisError(_SINGULAR_SOLVE) from None
     dq_dxi = Uq @ Qm  # rates per independent coordinate
     rows_q, cols_all, cols_ign = ix.rows_q, ix.cols_all, ix.cols_ign
     top = np.hstack([dq_dxi[rows_q][:, cols_all], UI[rows_q]])
@@ -914,17 +985,10 @@ def linearize_steady(problem: NonholonomicProblem, e: Equilibrium, p: np.ndarray
     ign = np.vstack([dq_dxi[rows_q][:, cols_ign], acc_q[:, cols_ign]]) if cols_ign else np.zeros((0, 0))
     scale = max(1.0, float(np.max(np.abs(Jw)))) if Jw.size else 1.0
     if ign.size and np.max(np.abs(ign)) > 1e-7 * scale:
-        raise AnalysisError("the reduced equations depend on an ignorable coordinate at this steady motion "
-                            "(internal check of the split failed)")
+        raise AnalysisError(_IGNORABLE_ENTERS)
     Mr = UI.T @ M @ UI
     nxi = len(rows_q)
-    Kf, Cf = -Mr @ Jw[nxi:, :nxi], -Mr @ Jw[nxi:, nxi:]
-    families, undeflated, deflated = _deflate(problem, e, p, Jw, [names[i] for i in rows_q], split.independent)
-    vals = np.linalg.eigvals(deflated) if deflated.size else np.zeros(0, complex)
-    vals = vals[np.lexsort((vals.imag, vals.real))]
-    return SteadyLinearization([names[i] for i in rows_q], list(split.independent), Jw, deflated, vals,
-                               Mr, Cf, Kf, Jw[:nxi, :nxi], Jw[:nxi, nxi:], list(split.ignorable), families,
-                               undeflated)
+    return Jw, Mr, -Mr @ Jw[nxi:, :nxi], -Mr @ Jw[nxi:, nxi:]
 
 
 def _deflate(problem: NonholonomicProblem, e: Equilibrium, p: np.ndarray, Jw: np.ndarray, xi: list[str],
@@ -932,7 +996,7 @@ def _deflate(problem: NonholonomicProblem, e: Equilibrium, p: np.ndarray, Jw: np
     """Remove the zero eigenvalue of each family of steady motions exactly: its direction t (the derivative of the
     steady motion along a given rate or a --given coordinate, from the steady-motion equations) satisfies
     Jw t = 0; in the basis [t, complement] the first columns vanish and the rest is the deflated matrix."""
-    given = [f"der({c})" for c in problem.fixed_rates] + list(problem.given)
+    given = problem.families
     if not given or not Jw.size:
         return [], [], Jw
     z = problem.state(e)

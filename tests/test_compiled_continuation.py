@@ -1,6 +1,8 @@
-"""The continuation's corrector as compiled code (numeric/newton.c, mechsys_corrector): the same Newton steps as
-the Python loop (analysis/equilibrium/continuation.py, _Tracer.newton) on a sweep's bordered system, the same
-Jacobian at the result, and the same sweeps; used only where the swept value moves the arguments affinely."""
+"""A sweep's per-point work as compiled code (numeric/newton.c): the continuation's corrector (mechsys_corrector:
+the same Newton steps as the Python loop, analysis/equilibrium/continuation.py _Tracer.newton, on a sweep's
+bordered system, the same Jacobian at the result, the same sweeps; used only where the swept value moves the
+arguments affinely) and the linearization about a steady motion (mechsys_linearize: the numpy steps of
+analysis/equilibrium/nonholonomic.py, the same matrices, eigenvalues, families and refusals)."""
 from __future__ import annotations
 
 import sys
@@ -13,6 +15,7 @@ import mechsys
 from mechsys.analysis.equilibrium import bifurcation as bf
 from mechsys.analysis.equilibrium.continuation import _Tracer
 from mechsys.analysis.equilibrium.equilibria import is_isolated, solve_equilibria
+from mechsys.analysis.equilibrium import nonholonomic as nh
 from mechsys.analysis.equilibrium.nonholonomic import NonholonomicProblem
 from mechsys.errors import AnalysisError
 from mechsys.numeric import native
@@ -22,6 +25,7 @@ from helpers import SYSTEMS_DIR  # noqa: E402
 
 pytestmark = pytest.mark.skipif(native.newton_library() is None, reason="no C compiler")
 
+DATA = Path(__file__).parent / "data"
 DISK = SYSTEMS_DIR / "rolling_disk.yaml"
 
 
@@ -130,3 +134,53 @@ def test_arguments_out_of_range_are_refused():
     assert make(np.ones(nz), np.ones(nz + 1), 1e-10) is not None
     with pytest.raises(AnalysisError, match="out of range"):
         make(np.ones(nz + 1), np.ones(nz + 1), 1e-10)  # s of the wrong length
+
+
+def _both(problem, e, p):
+    """linearize_steady compiled and in numpy (the outcome: a SteadyLinearization or the AnalysisError's text)."""
+    out = []
+    for compiled in (True, False):
+        run = problem.compiled_linearization
+        if not compiled:
+            problem.__dict__["compiled_linearization"] = None
+        try:
+            out.append(nh.linearize_steady(problem, e, p))
+        except AnalysisError as exc:
+            out.append(str(exc))
+        finally:
+            problem.__dict__["compiled_linearization"] = run
+    return out
+
+
+@pytest.mark.parametrize("path, options, name, values", [
+    (SYSTEMS_DIR / "bicycle.yaml", {}, "v", [0.0, 0.5, 4.3, 8.0]),  # holonomic + nonholonomic, a given rate
+    (DISK, {}, "g", [9.81]),
+    (DISK, {"given": ["lean"], "solve": ["der(yaw)"]}, "g", [9.81]),  # a --given coordinate's family
+    (DATA / "chaplygin_sleigh.yaml", {"given": ["psi"]}, "v", [-1.0, 1.5]),
+])
+def test_the_compiled_linearization_is_the_numpy_one(path, options, name, values):
+    problem = NonholonomicProblem(mechsys.load(path), **options)
+    assert problem.compiled_linearization is not None
+    par = bf.swept_parameter(problem, name)
+    compared = refused = 0
+    for value in values:
+        p = par.at(value)
+        for z in solve_equilibria(problem, p)[:8]:
+            a, b = _both(problem, problem.equilibrium(z), p)
+            if isinstance(b, str):  # the same refusal (a singular split: the bicycle's pivot at v = 0)
+                assert a == b
+                refused += 1
+                continue
+            compared += 1
+            scale = 1.0 + np.max(np.abs(b.jacobian))
+            for key in ("jacobian", "M", "C", "K", "W", "V"):
+                assert np.allclose(getattr(a, key), getattr(b, key), rtol=1e-9, atol=1e-9 * scale), key
+            assert (a.families, a.undeflated, a.coordinates, a.speeds) == \
+                (b.families, b.undeflated, b.coordinates, b.speeds)
+            # the deflated matrices differ by an orthogonal change of basis: their eigenvalues agree
+            assert a.deflated.shape == b.deflated.shape
+            size = 1.0 + np.max(np.abs(b.eigenvalues), initial=0.0)
+            assert np.allclose(np.sort_complex(a.eigenvalues), np.sort_complex(b.eigenvalues), atol=1e-8 * size)
+    assert compared >= len(values)
+    if name == "v" and path.stem == "bicycle":
+        assert refused >= 1  # the refusal path was exercised
