@@ -38,25 +38,15 @@ def _tracers(path: Path, name: str, at: float):
     roots = [z for z in solve_equilibria(problem, P) if is_isolated(problem, z, P)]
     assert roots
     z0 = roots[0]
-    rows = bf._independent_rows(problem.J(z0, P))
-    D = problem.auxiliary_scale(roots)
+    system = bf.SweptSystem(problem, par, problem.auxiliary_scale(roots), bf._independent_rows(problem.J(z0, P)))
     n = len(z0)
-
-    def F(x, p):
-        return problem.F(D * x, par.at(p))[rows]
-
-    def Fx(x, p):
-        return problem.J(D * x, par.at(p))[rows] * D
-
-    def Fp(x, p):
-        return par.Fp(D * x, p)[rows]
-
+    F, Fx, Fp = system.F, system.Fx, system.Fp
     s = np.where(np.arange(n) >= problem.nq + len(problem.rate_unknowns), bf.AUX_ARC_WEIGHT, 1.0)
-    factory = bf._compiled_corrector(problem, par, [(z0 / D, at)], D, rows)
+    factory = system.compiled([(z0 / system.D, at)])
     assert factory is not None
     python = _Tracer(F, Fx, Fp, None, n, s, 1e-10, 1e-8, np.ones(n))
     compiled = _Tracer(F, Fx, Fp, None, n, s, 1e-10, 1e-8, np.ones(n), compiled=factory)
-    return python, compiled, python.z_of(z0 / D, at)
+    return python, compiled, python.z_of(z0 / system.D, at)
 
 
 @pytest.mark.parametrize("path, name, at", [
@@ -102,8 +92,8 @@ def test_a_swept_value_that_moves_the_arguments_nonlinearly_keeps_the_python_loo
     assert not radius.affine and gravity.affine and bf.swept_parameter(problem, "der(spin)").affine
     z = np.zeros(len(problem.unknowns))
     rows = list(range(len(z)))
-    assert bf._compiled_corrector(problem, radius, [(z, 0.3)], np.ones(len(z)), rows) is None
-    assert bf._compiled_corrector(problem, gravity, [(z, 9.81)], np.ones(len(z)), rows) is not None
+    assert bf.SweptSystem(problem, radius, np.ones(len(z)), rows).compiled([(z, 0.3)]) is None
+    assert bf.SweptSystem(problem, gravity, np.ones(len(z)), rows).compiled([(z, 9.81)]) is not None
 
 
 @pytest.mark.parametrize("name, lo, hi", [("g", 5.0, 15.0), ("r", 0.2, 0.4)])
@@ -112,7 +102,7 @@ def test_a_sweep_with_the_compiled_corrector_is_the_python_loops_sweep(monkeypat
     same events to 1e-8 and the same verdicts as with the Python loop."""
     def run(compiled: bool):
         if not compiled:
-            monkeypatch.setattr(bf, "_compiled_corrector", lambda *a: None)
+            monkeypatch.setattr(bf.SweptSystem, "compiled", lambda self, starts: None)
         return bf.sweep(mechsys.load(DISK), name, lo, hi, 21)
 
     a, b = run(True), run(False)
@@ -130,7 +120,7 @@ def test_arguments_out_of_range_are_refused():
     problem = NonholonomicProblem(mechsys.load(DISK))
     par = bf.swept_parameter(problem, "g")
     nz = len(problem.unknowns)
-    make = bf._compiled_corrector(problem, par, [(np.zeros(nz), 9.81)], np.ones(nz), list(range(nz)))
+    make = bf.SweptSystem(problem, par, np.ones(nz), list(range(nz))).compiled([(np.zeros(nz), 9.81)])
     assert make(np.ones(nz), np.ones(nz + 1), 1e-10) is not None
     with pytest.raises(AnalysisError, match="out of range"):
         make(np.ones(nz + 1), np.ones(nz + 1), 1e-10)  # s of the wrong length

@@ -183,16 +183,43 @@ def _rate_parameter(problem: EquilibriumProblem, coord: str) -> SweptParameter:
     return SweptParameter(name, problem, lambda p: P, lambda p, P: np.zeros(len(P)), given, lambda p, P: unit, True)
 
 
-def _compiled_corrector(problem: EquilibriumProblem, par: SweptParameter, starts: list, D: np.ndarray,
-                        rows: list[int] | slice):
-    """The continuation's compiled corrector for F, Fx and Fp of ``sweep`` (a factory, see continuation.Compiled),
-    where the problem has one and the swept p moves its arguments affinely; None otherwise (the Python loop)."""
-    make = getattr(problem, "compiled_corrector", None)
-    if make is None or not par.affine or not starts:
-        return None
-    p_ref = float(starts[0][1])
-    P = par.at(p_ref)
-    return make(p_ref, P, par.dpvec(p_ref, P), par.drates(p_ref, P), D, rows)
+@dataclass
+class SweptSystem:
+    """A sweep's equations as continuation sees them: F(x, p) = E(D x, P(p))[rows], x the problem's unknowns divided
+    by D (``sweep`` scales the auxiliary ones down), ``rows`` a square subset of the equations, p the swept value;
+    ``eig`` raises Undefined where the linearization is not defined (the branch ends there, with the reason)."""
+
+    problem: EquilibriumProblem
+    par: SweptParameter
+    D: np.ndarray
+    rows: list[int] | slice = field(default_factory=lambda: slice(None))
+
+    def F(self, z: np.ndarray, p: float) -> np.ndarray:
+        return self.problem.F(self.D * z, self.par.at(p))[self.rows]
+
+    def Fx(self, z: np.ndarray, p: float) -> np.ndarray:
+        return self.problem.J(self.D * z, self.par.at(p))[self.rows] * self.D
+
+    def Fp(self, z: np.ndarray, p: float) -> np.ndarray:
+        return self.par.Fp(self.D * z, p)[self.rows]
+
+    def eig(self, z: np.ndarray, p: float) -> np.ndarray:
+        z = self.D * z
+        self.par.at(p)
+        try:
+            return pencil_eigenvalues(self.problem, self.problem.equilibrium(z))
+        except AnalysisError as exc:  # e.g. a singular saddle-point system: the branch ends here, with the reason
+            raise Undefined(str(exc)) from None
+
+    def compiled(self, starts: list[tuple[np.ndarray, float]]):
+        """The continuation's compiled corrector for F, Fx and Fp (a factory, see continuation.Compiled), where the
+        problem has one and the swept p moves its arguments affinely; None otherwise (the Python loop)."""
+        make = getattr(self.problem, "compiled_corrector", None)
+        if make is None or not self.par.affine or not starts:
+            return None
+        p_ref = float(starts[0][1])
+        P = self.par.at(p_ref)
+        return make(p_ref, P, self.par.dpvec(p_ref, P), self.par.drates(p_ref, P), self.D, self.rows)
 
 
 def sweep(model: MechanicalModel, name: str, start: float, stop: float, points: int = 101,
@@ -208,30 +235,14 @@ def sweep(model: MechanicalModel, name: str, start: float, stop: float, points: 
     name = par.name  # der(NAME) spelled without spaces
     lo, hi = min(start, stop), max(start, stop)
 
-    rows: list[int] | slice = slice(None)  # the equations continued on (a square system), chosen below
     # continuation measures arclength in the unknowns it is given: auxiliary unknowns of large size (a bicycle's
     # multipliers, hundreds of newtons) would shrink its steps in the parameter, so a problem may scale them down
     # (the unknowns the branches report are never scaled); and as they can grow by orders of magnitude along a
     # branch (multipliers with the square of a growing yaw rate), they are also weighted down in the arclength
-    # (they follow from the reported unknowns; Newton still solves them to the full tolerance)
-    D = np.ones(len(problem.unknowns))
-
-    def F(z, p):
-        return problem.F(D * z, par.at(p))[rows]
-
-    def Fx(z, p):
-        return problem.J(D * z, par.at(p))[rows] * D
-
-    def Fp(z, p):
-        return par.Fp(D * z, p)[rows]
-
-    def eig(z, p):
-        z = D * z
-        par.at(p)
-        try:
-            return pencil_eigenvalues(problem, problem.equilibrium(z))
-        except AnalysisError as exc:  # e.g. a singular saddle-point system: the branch ends here, with the reason
-            raise Undefined(str(exc)) from None
+    # (they follow from the reported unknowns; Newton still solves them to the full tolerance). The rows continued
+    # on (a square system) are chosen below
+    system = SweptSystem(problem, par, np.ones(len(problem.unknowns)))
+    F, Fx, Fp = system.F, system.Fx, system.Fp
 
     starts = []
     undefined = []
@@ -260,7 +271,7 @@ def sweep(model: MechanicalModel, name: str, start: float, stop: float, points: 
     span = hi - lo if hi > lo else 1.0
     step = span / max(points - 1, 1)
     if starts:
-        rows = _independent_rows(problem.J(starts[0][0], par.at(starts[0][1])))
+        system.rows = _independent_rows(problem.J(starts[0][0], par.at(starts[0][1])))
 
     def smooth(z: np.ndarray, p: float) -> bool:
         try:
@@ -271,9 +282,10 @@ def sweep(model: MechanicalModel, name: str, start: float, stop: float, points: 
     scale = getattr(problem, "auxiliary_scale", None)
     arc = None  # the arclength weights: auxiliary unknowns count 1/AUX_ARC_WEIGHT of a reported one
     if scale is not None and starts:
-        D = scale([z for z, _ in starts])
-        starts = [(z / D, p) for z, p in starts]
-        arc = np.where(np.arange(len(D)) >= len(problem.free) + len(problem.rate_unknowns), AUX_ARC_WEIGHT, 1.0)
+        system.D = scale([z for z, _ in starts])
+        starts = [(z / system.D, p) for z, p in starts]
+        arc = np.where(np.arange(len(system.D)) >= len(problem.free) + len(problem.rate_unknowns), AUX_ARC_WEIGHT,
+                       1.0)
     keep = [smooth(z, p) for z, p in starts]  # not smooth: e.g. d sqrt(mu)/d mu at mu = 0
     undefined += [f"{name} = {p:g} (the derivatives of the equations are not finite there)"
                   for p in sorted({p for (_, p), ok in zip(starts, keep) if not ok})]
@@ -284,8 +296,8 @@ def sweep(model: MechanicalModel, name: str, start: float, stop: float, points: 
         # the point verdicts below read the linearizations the continuation's eigenvalues computed (in workers)
         share = ((problem.take_linearizations, problem.give_linearizations)
                  if hasattr(problem, "take_linearizations") else None)
-        branches = sweep_parameter(F, Fx, Fp, starts, lo, hi, eig, skipped=skipped, share=share,
-                                   compiled=_compiled_corrector(problem, par, starts, D, rows), ds=step / 2,
+        branches = sweep_parameter(F, Fx, Fp, starts, lo, hi, system.eig, skipped=skipped, share=share,
+                                   compiled=system.compiled(starts), ds=step / 2,
                                    ds_max=min(step, 0.2 * max(span, 1.0)), tol_re=ZERO_RE * 10,
                                    max_steps=max(2000, 20 * points), x_scale=arc,
                                    tol_scale=None if arc is None else np.ones(len(arc))) if starts else []
@@ -293,9 +305,9 @@ def sweep(model: MechanicalModel, name: str, start: float, stop: float, points: 
         raise AnalysisError(f"--sweep {name}: {exc}") from None
     for branch in branches:  # back to the problem's unknowns
         for pt in branch.points:
-            pt.x = D * pt.x
+            pt.x = system.D * pt.x
         for bif in branch.bifurcations:
-            bif.x = D * bif.x
+            bif.x = system.D * bif.x
     artefacts = {id(b) for b in _review(problem, branches, par.at, name)}
     states: dict = {}  # physical states of branch points, shared by the pairs compared
     twins = {id(b) for k, b in enumerate(branches) if id(b) not in artefacts
@@ -345,7 +357,7 @@ def sweep(model: MechanicalModel, name: str, start: float, stop: float, points: 
             refined = False
             if bif.kind in ("branch_point", "zero_eigenvalue"):
                 p_arc = bif.p
-                bif.p, bif.x = _refine_singular(problem, par, rows, bif.p, bif.x, step)
+                bif.p, bif.x = _refine_singular(problem, par, system.rows, bif.p, bif.x, step)
                 refined = bif.p != p_arc
             coords = {n: (wrap(v) if a else float(v)) for n, v, a in zip(names, bif.x[:nreport], angles)}
             events.append({"kind": bif.kind, "parameter": name, "value": float(bif.p), "coordinates": coords,
