@@ -5,7 +5,9 @@ from mechsys.codegen.package import Function, Package, Style, function_body, rea
 from mechsys.numeric.native import _c_printer
 
 STYLE = Style(
-    printer=_c_printer,  # mechsys's own C printer: floored Mod as Python, exact small integer powers, DiracDelta 0
+    # mechsys's own C printer (floored Mod as Python, exact small integer powers, DiracDelta 0), with sympy's
+    # readable layout: the fast one is for code nobody reads (numeric/native.py)
+    printer=lambda names: _c_printer(names, fast=False),
     bind=lambda vector, i, code: (f"    const double {code} = p->{code};" if vector == "p"
                                   else f"    const double {code} = {vector}[{i}];"),
     element=lambda vector, i: f"{vector}[{i}]",

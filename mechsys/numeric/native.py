@@ -43,8 +43,20 @@ def compiler() -> Optional[str]:
     return None
 
 
-def _c_printer(names: dict):
+def _c_printer(names: dict, fast: bool = True):
+    """A C99 printer of straight-line code; ``names`` maps symbols to C names. With ``fast``, sums, products,
+    powers, numbers, symbols and the elementary functions are printed directly, in the order of the expression's
+    own arguments, sums parenthesized: 30 times faster than sympy's printer, which orders the terms of every sum
+    and weighs precedence (the bicycle's pieces: 0.07 s instead of 2.2 s). Any other node goes to sympy's C99
+    printer, and an expression with a node C cannot express is refused as before (sympy's strict printer raises,
+    or, not strict, sympy prints it all). The sums' order is not sympy's print order, so round-off may differ from
+    the Python path's. Code users read (codegen's C target) keeps sympy's layout (not ``fast``)."""
+    import sympy as sp
     from sympy.printing.c import C99CodePrinter
+
+    functions = {sp.sin: "sin", sp.cos: "cos", sp.tan: "tan", sp.asin: "asin", sp.acos: "acos", sp.atan: "atan",
+                 sp.sinh: "sinh", sp.cosh: "cosh", sp.tanh: "tanh", sp.exp: "exp", sp.log: "log", sp.Abs: "fabs"}
+    exact = 2.0 ** 53
 
     class Printer(C99CodePrinter):
         def _print_Symbol(self, expr):
@@ -65,6 +77,63 @@ def _c_printer(names: dict):
                 prod = "*".join([base] * abs(int(expr.exp)))
                 return f"(1.0/({prod}))" if expr.exp < 0 else f"({prod})"
             return super()._print_Pow(expr)
+
+        def doprint(self, expr, assign_to=None):
+            if assign_to is not None or not fast:
+                return super().doprint(expr, assign_to)
+            self._not_supported, self._number_symbols = set(), set()
+            text = self._fast(sp.sympify(expr))
+            if self._not_supported or self._number_symbols:
+                return super().doprint(expr)  # as before: sympy's text with its comments
+            return text
+
+        def _fast(self, e) -> str:
+            fast = self._fast
+            if e.is_Symbol:
+                name = names.get(e)
+                return name if name is not None else self._print(e)
+            if e.is_Add:
+                return "(" + " + ".join(fast(a) for a in e.args) + ")"
+            if e.is_Mul:
+                num, den = [], []
+                for a in e.args:
+                    if a.is_Pow and a.exp.is_Integer and a.exp < 0:
+                        den.append(fast(a.base) if a.exp == -1 else fast(a.base ** -a.exp))
+                    elif a.is_Rational and not a.is_Integer and abs(a.p) < exact and a.q < exact:
+                        num.append(f"{a.p}.0")
+                        den.append(f"{a.q}.0")
+                    else:
+                        num.append(fast(a))
+                top = "*".join(num) if num else "1.0"  # a product needs no parentheses: it is never a factor
+                return f"{top}/({'*'.join(den)})" if den else top  # (products are flat), and a base is wrapped
+            if e.is_Pow:
+                x = e.exp
+                if x.is_Integer and 1 < abs(int(x)) <= 4:
+                    base = f"({fast(e.base)})"
+                    prod = "*".join([base] * abs(int(x)))
+                    return f"(1.0/({prod}))" if x < 0 else f"({prod})"
+                if x == -1:
+                    return f"(1.0/({fast(e.base)}))"
+                if x == sp.S.Half:
+                    return f"sqrt({fast(e.base)})"
+                if x == -sp.S.Half:
+                    return f"(1.0/sqrt({fast(e.base)}))"
+                if x.is_Integer:
+                    return f"pow({fast(e.base)}, {int(x)}.0)"
+                return self._print(e)
+            if e.is_Integer:
+                return f"({int(e)}.0)" if abs(int(e)) < exact else self._print(e)
+            if e.is_Rational:
+                return f"({e.p}.0/{e.q}.0)" if abs(e.p) < exact and e.q < exact else self._print(e)
+            if e.is_Float:
+                value = float(e)
+                return f"({value!r})" if np.isfinite(value) else self._print(e)
+            name = functions.get(type(e))
+            if name is not None:
+                return f"{name}({fast(e.args[0])})"
+            if type(e) is sp.atan2:
+                return f"atan2({fast(e.args[0])}, {fast(e.args[1])})"
+            return self._print(e)
 
     return Printer()
 
