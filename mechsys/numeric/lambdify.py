@@ -94,7 +94,8 @@ def value_and_jacobian_program(exprs: Sequence[sp.Expr], args: Sequence[sp.Symbo
     taken = set().union(*(e.free_symbols for e in exprs), args, wrt)
     replacements, reduced = sp.cse(exprs, symbols=sp.numbered_symbols("x", real=True, exclude=taken), order="none")
     column = {w: j for j, w in enumerate(wrt)}
-    deriv: dict[sp.Symbol, dict[int, sp.Expr]] = {w: {j: sp.Integer(1)} for w, j in column.items()}
+    ONE = sp.S.One
+    deriv: dict[sp.Symbol, dict[int, sp.Expr]] = {w: {j: ONE} for w, j in column.items()}
     program = ForwardProgram(list(args), [], [], {}, list(reduced), [])
     values = {}
     order = []
@@ -116,7 +117,7 @@ def value_and_jacobian_program(exprs: Sequence[sp.Expr], args: Sequence[sp.Symbo
     diff = Differentiator()  # sympy's diff, each subexpression once
 
     def chain(value: sp.Expr) -> dict[int, sp.Expr]:
-        out: dict[int, sp.Expr] = {}
+        terms: dict[int, list[sp.Expr]] = {}
         for s in value.free_symbols:
             ds = deriv.get(s)
             if not ds:
@@ -125,7 +126,9 @@ def value_and_jacobian_program(exprs: Sequence[sp.Expr], args: Sequence[sp.Symbo
             if partial == 0:
                 continue
             for j, dsj in ds.items():
-                out[j] = out.get(j, sp.Integer(0)) + partial * dsj
+                terms.setdefault(j, []).append(partial if dsj is ONE else partial * dsj)
+        # one Add per entry: adding term by term flattened the growing sum again at every term (quadratic)
+        out = {j: sp.Add(*t) for j, t in terms.items()}
         return {j: e for j, e in out.items() if e != 0}
 
     for sym in order:
