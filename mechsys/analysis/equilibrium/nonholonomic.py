@@ -477,15 +477,21 @@ class NonholonomicProblem(EquilibriumProblem):
 
     @property
     def newton_path(self) -> str:
-        return "compiled" if self.pieces._native is not None and native.newton_library() is not None else "python"
+        return "compiled" if self._compiled is not None else "python"
+
+    @property
+    def _compiled(self):
+        """(the pieces' compiled program, newton.c's library), or None without them (no C compiler)."""
+        program = self.pieces._native
+        lib = native.newton_library() if program is not None else None
+        return None if lib is None else (program, lib)
 
     def compiled_newton(self, p: np.ndarray):
         """The multistart's deflated Newton as compiled code over the pieces' program (numeric/newton.c) at the
         parameters p and the current given values and rates; None without the compiled pieces or a compiler."""
-        program = self.pieces._native
-        lib = native.newton_library() if program is not None else None
-        if lib is None:
+        if self._compiled is None:
             return None
+        program, lib = self._compiled
         n, m = self.n, self.m
         nz = len(self.unknowns)
         q, u, a, lam = self.full_state(np.zeros(nz))
@@ -505,10 +511,9 @@ class NonholonomicProblem(EquilibriumProblem):
         whose parameters P and given rates move affinely with p (slopes dP and drates, fixed_rates order; the given
         rates now are those at p_ref): a factory (s, r, tol) -> corrector (continuation.Compiled); None without
         the compiled pieces or a compiler."""
-        program = self.pieces._native
-        lib = native.newton_library() if program is not None else None
-        if lib is None:
+        if self._compiled is None:
             return None
+        program, lib = self._compiled
         n, m, ix = self.n, self.m, self._index
         nz = len(self.unknowns)
         base = np.concatenate([*self.full_state(np.zeros(nz)), np.asarray(P, dtype=float)])
@@ -542,13 +547,12 @@ class NonholonomicProblem(EquilibriumProblem):
     def compiled_linearization(self) -> native.CompiledLinearization | None:
         """linearize_steady's numeric steps as compiled code (numeric/newton.c) for this split and these families;
         None without the compiled pieces or a compiler, or with no state to linearize (numpy then)."""
-        program = self.pieces._native
-        lib = native.newton_library() if program is not None else None
         pieces, split, n, m = self.pieces, self.split, self.n, self.m
         ix = _indices(pieces.names, split)
         xi, nu = [pieces.names[i] for i in ix.rows_q], list(split.independent)
-        if lib is None or not xi + nu:
+        if self._compiled is None or not xi + nu:
             return None
+        lib = self._compiled[1]
         index, sign = self._gather
         # a family's direction t = (dq[xi], du[nu]) is read from its dz where z places the entries (full_state)
         src = {int(w): k for k, w in enumerate(self._layout[0])}
@@ -915,6 +919,7 @@ def linearize_steady(problem: NonholonomicProblem, e: Equilibrium, p: np.ndarray
     p = parameter_values(problem.model) if p is None else p
     pieces, split = problem.pieces, problem.split
     names = pieces.names
+    ix = _indices(names, split)
     v = pieces.evaluate(*problem.point(e), p)
     run = problem.compiled_linearization
     if run is not None:
@@ -929,11 +934,10 @@ def linearize_steady(problem: NonholonomicProblem, e: Equilibrium, p: np.ndarray
         undeflated = [g for g, f in zip(given, flags) if not f]
     else:
         Jw, Mr, Kf, Cf = _reduced(problem, v)
-        families, undeflated, deflated = _deflate(problem, e, p, Jw, [names[i] for i in _indices(names, split).rows_q],
+        families, undeflated, deflated = _deflate(problem, e, p, Jw, [names[i] for i in ix.rows_q],
                                                   split.independent)
     vals = np.linalg.eigvals(deflated) if deflated.size else np.zeros(0, complex)
     vals = vals[np.lexsort((vals.imag, vals.real))]
-    ix = _indices(names, split)
     nxi = len(ix.rows_q)
     return SteadyLinearization([names[i] for i in ix.rows_q], list(split.independent), Jw, deflated, vals,
                                Mr, Cf, Kf, Jw[:nxi, :nxi], Jw[:nxi, nxi:], list(split.ignorable), families,
