@@ -464,7 +464,10 @@ int mechsys_corrector(const corrector_t *C, double *z, const double *border, int
             double rmax = 0.0, amax = 0.0;
             for (int i = 0; i < nz; i++) if (fabs(res[i]) > rmax) rmax = fabs(res[i]);
             for (int i = 0; i < nz; i++)
-                for (int j = 0; j < m; j++) if (fabs(A[i * m + j] / C->r[j]) > amax) amax = fabs(A[i * m + j] / C->r[j]);
+                for (int j = 0; j < m; j++) {
+                    double a = fabs(A[i * m + j] / C->r[j]);
+                    if (a > amax) amax = a;
+                }
             if (!(rmax <= 1e3 * C->tol * (1.0 + amax * zmax))) return 0;
             *iters = k;
             /* the Jacobian at z (the arguments are in place): the tangent and det of the point read it next */
@@ -549,7 +552,12 @@ int mechsys_linearize(const lin_t *L, const double *raw, double *Jw, double *Mr,
     double *P = w; w += N * 2 * n;
     for (int i = 0; i < N * N; i++) K[i] = 0.0;
     for (int i = 0; i < n; i++) for (int j = 0; j < n; j++) K[i * N + j] = M[i * n + j];
-    for (int i = 0; i < m; i++) for (int j = 0; j < n; j++) { K[j * N + n + i] = -A[i * n + j]; K[(n + i) * N + j] = A[i * n + j]; }
+    for (int i = 0; i < m; i++) {
+        for (int j = 0; j < n; j++) {
+            K[j * N + n + i] = -A[i * n + j];
+            K[(n + i) * N + j] = A[i * n + j];
+        }
+    }
     for (int i = 0; i < N; i++) for (int j = 0; j < 2 * n; j++) P[i * 2 * n + j] = raw[L->jac + (size_t)i * 2 * n + j];
     if (!lu_factor(K, N, piv)) return 10;
     lu_apply(K, N, piv, P, 2 * n);
@@ -603,7 +611,10 @@ int mechsys_linearize(const lin_t *L, const double *raw, double *Jw, double *Mr,
     for (int i = 0; i < n; i++) {
         for (int c = 0; c < nk; c++) {
             double t = 0.0, u = 0.0;
-            for (int j = 0; j < n; j++) { t += P[i * 2 * n + j] * Qm[j * nk + c]; u += P[i * 2 * n + n + j] * dq[j * nk + c]; }
+            for (int j = 0; j < n; j++) {
+                t += P[i * 2 * n + j] * Qm[j * nk + c];
+                u += P[i * 2 * n + n + j] * dq[j * nk + c];
+            }
             acc[i * nk + c] = t + u;
         }
         for (int c = 0; c < nI; c++) {
@@ -653,7 +664,8 @@ int mechsys_linearize(const lin_t *L, const double *raw, double *Jw, double *Mr,
     double *dz = w; w += nz > 0 ? nz : 1;
     double *T = w; w += nt * (L->nfam > 0 ? L->nfam : 1);
     double *t = w; w += nt;
-    double *lwork = w; w += 2 * (size_t)(L->size > nz ? L->size : nz) * (L->size > nz ? L->size : nz) + 2 * (L->size + nz);
+    size_t wide = L->size > nz ? L->size : nz;
+    double *lwork = w; w += 2 * wide * wide + 2 * (L->size + nz);
     for (int i = 0; i < L->size * nz; i++) Jz[i] = raw[L->jindex[i]] * L->jsign[i];
     for (int f = 0; f < L->nfam; f++) {
         for (int i = 0; i < L->size; i++) col[i] = -raw[L->rhs[f * L->size + i]];
