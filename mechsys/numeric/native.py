@@ -584,8 +584,8 @@ class CompiledLinearization:
     linearize_steady and _deflate, the same steps) from a point's evaluated pieces. ``sizes``: n, m, mh, size,
     jac (where dE/d(q, u) starts in the output), hfirst (the holonomic rows' first row); ``lists``: the index lists
     I, D, keep, elim, rows_q, cols_all, cols_ign; ``index``, ``sign``: dE/dz gathered from the output (size x nz);
-    ``rhs``: the families' columns (nfam x size, indices into the output); ``tsrc``, ``tone``: how each family's
-    direction is read from its dz. Called with the output followed by a zero: (status, Jw, Mr, Kf, Cf, deflated,
+    ``rhs``: the families' columns (nfam x size, indices into the output); ``tsrc`` (nt: how a family's direction
+    is read from its dz, the same for all) and ``tone`` (nfam: its entry set to 1). Called with the output followed by a zero: (status, Jw, Mr, Kf, Cf, deflated,
     which families were deflated); status 0 ok, else newton.c's code and the arrays None."""
 
     _LISTS = ("I", "D", "keep", "elim", "rows_q", "cols_all", "cols_ign")
@@ -601,7 +601,7 @@ class CompiledLinearization:
         nz = k["jindex"].shape[1] if k["jindex"].ndim == 2 else 0
         nfam, nxi, nI = len(k["tone"]), len(k["rows_q"]), len(k["I"])
         nt = nxi + nI
-        ok = (k["jindex"].shape == (size, nz) and k["rhs"].shape == (nfam, size) and k["tsrc"].shape == (nfam, nt)
+        ok = (k["jindex"].shape == (size, nz) and k["rhs"].shape == (nfam, size) and k["tsrc"].shape == (nt,)
               and len(k["D"]) == m and len(k["elim"]) == sizes["mh"] and len(k["cols_all"]) == nxi
               and all(np.all((k[name] >= 0) & (k[name] < n)) for name in ("I", "D", "keep", "elim", "rows_q"))
               and all(np.all((k[name] >= 0) & (k[name] < len(k["keep"]))) for name in ("cols_all", "cols_ign"))

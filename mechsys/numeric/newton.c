@@ -496,7 +496,7 @@ typedef struct {
     const long *jindex;   /* size x nz: dE/dz of the steady-motion unknowns, gathered from raw (times jsign) */
     const double *jsign;
     const long *rhs;      /* nfam x size: raw index of the family's column of dE/du (a rate) or dE/dq */
-    const int *tsrc;      /* nfam x nt: the unknown (index into z) each entry of the family's direction reads, -1: 0 */
+    const int *tsrc;      /* nt: the unknown (index into z) each entry of a family's direction reads, -1: 0 */
     const int *tone;      /* nfam: the entry set to 1 (along the given rate or coordinate itself), -1: none */
 } lin_t;
 
@@ -674,7 +674,7 @@ int mechsys_linearize(const lin_t *L, const double *raw, double *Jw, double *Mr,
             lstsq(Jc, L->size, nz, col, dz, lwork);
         }
         for (int e = 0; e < nt; e++) {
-            int src = L->tsrc[f * nt + e];
+            int src = L->tsrc[e];
             t[e] = src >= 0 ? dz[src] : 0.0;
         }
         if (L->tone[f] >= 0) t[L->tone[f]] = 1.0;

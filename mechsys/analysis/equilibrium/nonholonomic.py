@@ -566,7 +566,7 @@ class NonholonomicProblem(EquilibriumProblem):
         sizes = {"n": n, "m": m, "mh": self.mh, "size": pieces.size, "jac": pieces._outputs, "hfirst": n + 2 * m}
         return native.CompiledLinearization(lib, sizes=sizes, lists=lists, index=index, sign=sign,
                                             rhs=np.array(rhs, dtype=int).reshape(-1, pieces.size),
-                                            tsrc=np.array([tsrc] * len(rhs), dtype=int).reshape(len(rhs), -1),
+                                            tsrc=np.array(tsrc, dtype=int),
                                             tone=np.array(tone, dtype=int), rtol=LINEARIZATION_RTOL,
                                             full_size=pieces._full_size)
 
