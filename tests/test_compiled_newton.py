@@ -123,3 +123,17 @@ def test_a_stored_search_is_kept_per_numeric_path(tmp_path, monkeypatch):
         p = eqm.parameter_values(problem.model)
         keys[path] = eqm._disk_key(problem, (np.asarray(p).tobytes(), (), (), "[]", 40, "{}", 0))
     assert None not in keys.values() and keys["compiled"] != keys["python"]
+
+
+def test_the_library_built_beside_other_work_is_built_once(monkeypatch, tmp_path):
+    """prepare_newton builds newton.c in a thread (beside a model's own compilation); newton_library waits for
+    that build instead of starting another: one library in the cache, the same object for every caller."""
+    monkeypatch.setenv("MECHSYS_CACHE", str(tmp_path))
+    monkeypatch.setattr(native, "_newton_lib", {})
+    native.prepare_newton()
+    lib = native.newton_library()
+    assert lib is not None and native.newton_library() is lib
+    native.prepare_newton()  # built already: no second thread
+    assert [t.name for t in __import__("threading").enumerate()].count("mechsys-newton-build") == 0
+    assert len(list(tmp_path.glob("newton-*.so"))) == 1
+    assert lib.mechsys_newton_work(3, 3, 0, 0, 0) > 0

@@ -16,7 +16,7 @@ from mechsys.numeric.runtime import StateFunction, function_from_source, matrix_
 
 __all__ = ["generate_source", "compile_exprs", "matrix_source", "compile_matrix", "function_from_source",
            "matrix_from_source", "StateFunction", "value_and_jacobian_sources", "value_and_jacobian_program",
-           "ForwardProgram"]
+           "ForwardProgram", "shared_program", "differentiate_program"]
 
 
 class _Printer(PythonCodePrinter):
@@ -42,21 +42,34 @@ _RECENT: OrderedDict[tuple, str] = OrderedDict()
 _RECENT_SIZE = 16
 
 
-def generate_source(exprs: Sequence[sp.Expr], args: Sequence[sp.Symbol]) -> str:
-    """Python source of ``_f(a0, a1, ...)`` returning ``exprs`` (shared subexpressions computed once)."""
+def generate_source(exprs: Sequence[sp.Expr], args: Sequence[sp.Symbol], light: bool = False) -> str:
+    """Python source of ``_f(a0, a1, ...)`` returning ``exprs`` (shared subexpressions computed once). ``light``:
+    for code evaluated a few times only (light_cse)."""
     exprs = [sp.sympify(e) for e in exprs]
-    key = (tuple(exprs), tuple(args))
+    key = (tuple(exprs), tuple(args), light)
     source = _RECENT.get(key)
     if source is None:
-        source = _RECENT[key] = _generate_source(exprs, args)
+        source = _RECENT[key] = _generate_source(exprs, args, light)
         if len(_RECENT) > _RECENT_SIZE:
             _RECENT.popitem(last=False)
     return source
 
 
-def _generate_source(exprs: list[sp.Expr], args: Sequence[sp.Symbol]) -> str:
+def light_cse(exprs: list[sp.Expr]) -> tuple[list, list]:
+    """sympy's cse without its search for common sub-sums and sub-products (opt_cse): only the shared subtrees
+    become temporaries. The bicycle's M, f, A, b: 0.25 s instead of 0.8 s, with a quarter more operations; for
+    code that runs a few times (info's ranks, the cyclic test), not in a loop. sympy's full cse where its internal
+    tree_cse is not importable."""
+    try:
+        from sympy.simplify.cse_main import tree_cse
+    except ImportError:  # pragma: no cover - another sympy layout
+        return sp.cse(exprs, order="none")
+    return tree_cse(exprs, sp.numbered_symbols("x"), None, "none")  # (it skips the names the inputs use)
+
+
+def _generate_source(exprs: list[sp.Expr], args: Sequence[sp.Symbol], light: bool = False) -> str:
     names = {a: f"a{i}" for i, a in enumerate(args)}
-    replacements, reduced = sp.cse(exprs, order="none")
+    replacements, reduced = light_cse(exprs) if light else sp.cse(exprs, order="none")
     for k, (sym, _) in enumerate(replacements):
         names[sym] = f"x{k}"
     printer = _Printer(names)
@@ -88,22 +101,35 @@ def value_and_jacobian_program(exprs: Sequence[sp.Expr], args: Sequence[sp.Symbo
     seconds instead of a minute). ``rows``: only the first ``rows`` expressions are differentiated (all by
     default). Derivatives of subexpressions are generated on demand, so those only the undifferentiated outputs
     use cost nothing."""
+    return differentiate_program(shared_program(exprs, args, wrt), wrt, rows)
+
+
+def shared_program(exprs: Sequence[sp.Expr], args: Sequence[sp.Symbol],
+                   wrt: Sequence[sp.Symbol] = ()) -> ForwardProgram:
+    """The values part of a ForwardProgram: one CSE of ``exprs`` (no derivatives yet: differentiate_program forms
+    them symbolically, numeric/tangents.py prints them straight to C)."""
     exprs = [sp.sympify(e) for e in exprs]
     # real temporaries, as every input is: abs(x) then differentiates to sign(x), not to re/im/Derivative terms;
     # none equal to an input (a real coordinate named x4 is the symbol x4 with real=True)
     taken = set().union(*(e.free_symbols for e in exprs), args, wrt)
     replacements, reduced = sp.cse(exprs, symbols=sp.numbered_symbols("x", real=True, exclude=taken), order="none")
-    column = {w: j for j, w in enumerate(wrt)}
-    ONE = sp.S.One
-    deriv: dict[sp.Symbol, dict[int, sp.Expr]] = {w: {j: ONE} for w, j in column.items()}
     program = ForwardProgram(list(args), [], [], {}, list(reduced), [])
-    values = {}
-    order = []
     for k, (sym, value) in enumerate(replacements):
         program.symbols[f"x{k}"] = sym
         program.values.append((f"x{k}", value))
-        values[sym] = value
-        order.append(sym)
+    return program
+
+
+def differentiate_program(program: ForwardProgram, wrt: Sequence[sp.Symbol], rows: int | None = None) -> ForwardProgram:
+    """``program`` (shared_program's) with the symbolic derivatives of its values and the Jacobian of its first
+    ``rows`` outputs with respect to ``wrt`` (a new program; ``program`` is left as it is)."""
+    program = ForwardProgram(program.args, list(program.values), [], dict(program.symbols), program.outputs, [])
+    reduced = program.outputs
+    column = {w: j for j, w in enumerate(wrt)}
+    ONE = sp.S.One
+    deriv: dict[sp.Symbol, dict[int, sp.Expr]] = {w: {j: ONE} for w, j in column.items()}
+    values = {program.symbols[name]: value for name, value in program.values}
+    order = [program.symbols[name] for name, _ in program.values]
     index = {sym: k for k, sym in enumerate(order)}
     needed: set = set()
     todo = [s for e in reduced[:rows] for s in e.free_symbols if s in index]
@@ -175,14 +201,15 @@ def compile_exprs(exprs: Sequence[sp.Expr], args: Sequence[sp.Symbol]) -> Callab
 
 
 def matrix_source(expr: sp.Matrix, t: sp.Symbol, q: Sequence[sp.Symbol], u: Sequence[sp.Symbol],
-                  params: Sequence[sp.Symbol]) -> dict:
-    """Cacheable description of a compiled matrix: shape and generated source."""
+                  params: Sequence[sp.Symbol], light: bool = False) -> dict:
+    """Cacheable description of a compiled matrix: shape and generated source (``light``: generate_source's)."""
     expr = sp.Matrix(expr)
     empty = expr.shape[0] == 0 or expr.shape[1] == 0
-    return {"shape": list(expr.shape), "source": None if empty else generate_source(list(expr), [t, *q, *u, *params])}
+    return {"shape": list(expr.shape),
+            "source": None if empty else generate_source(list(expr), [t, *q, *u, *params], light)}
 
 
 def compile_matrix(expr: sp.Matrix, t: sp.Symbol, q: Sequence[sp.Symbol], u: Sequence[sp.Symbol],
-                   params: Sequence[sp.Symbol]) -> StateFunction:
+                   params: Sequence[sp.Symbol], light: bool = False) -> StateFunction:
     """A function of (t, q..., u..., p...) for ``expr`` (a Matrix), entries row by row."""
-    return matrix_from_source(matrix_source(expr, t, q, u, params))
+    return matrix_from_source(matrix_source(expr, t, q, u, params, light))

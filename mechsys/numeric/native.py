@@ -14,6 +14,7 @@ import shutil
 import subprocess
 import sys
 import tempfile
+import threading
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Optional, Sequence
@@ -422,56 +423,72 @@ def load_program(key: str, source: Optional[str], functions: dict[str, int], n_a
 NEWTON = Path(__file__).with_name("newton.c")
 _LONG = np.dtype(ctypes.c_long)
 _newton_lib: dict[str, Optional[ctypes.CDLL]] = {}
+_NEWTON_LOCK = threading.Lock()
+
+
+def prepare_newton() -> None:
+    """Start building newton.c's library in a thread, when it is not built yet: its compiler then runs beside the
+    model's own (two processes; a first steady-motion command saves the second). newton_library waits for it."""
+    cc = compiler()
+    if cc is None or cc in _newton_lib or _NEWTON_LOCK.locked():
+        return
+    threading.Thread(target=newton_library, name="mechsys-newton-build").start()  # not a daemon: exit waits
 
 
 def newton_library() -> Optional[ctypes.CDLL]:
     """newton.c's deflated Newton, built once per machine and source (-O2) and kept in the cache like the models'
     libraries; None without a C compiler or when it does not build (the caller keeps its Python loop)."""
-    from mechsys.numeric import cache
-
     cc = compiler()
     if cc is None:
         return None
-    if cc not in _newton_lib:
-        import hashlib
-
-        source = NEWTON.read_text(encoding="utf-8")
-        digest = hashlib.sha256(source.encode()).hexdigest()[:16]
-        key = f"newton-{sys.platform}-{platform.machine()}-{digest}"
-        path = cache.library(key)
-        lib = None
-        try:
-            if path is None:
-                with tempfile.TemporaryDirectory(prefix="mechsys-newton-") as tmp:
-                    built = Path(tmp) / f"{key}.so"
-                    build(source, built)
-                    path = cache.store_library(key, built)
-                    lib = ctypes.CDLL(str(path or built))  # loaded before the temporary folder goes
-            else:
-                lib = ctypes.CDLL(str(path))
-        except (AnalysisError, OSError):
-            lib = None
-        if lib is not None:
-            fn = lib.mechsys_deflated_newton
-            fn.argtypes = ([ctypes.c_void_p, ctypes.c_void_p, ctypes.c_int, ctypes.c_void_p, ctypes.c_void_p]
-                           + [ctypes.c_int] * 4 + [ctypes.c_void_p] * 3 + [ctypes.c_int, ctypes.c_void_p, ctypes.c_int]
-                           + [ctypes.c_void_p] * 2)
-            fn.restype = ctypes.c_int
-            lib.mechsys_newton_work.argtypes = [ctypes.c_int] * 5
-            lib.mechsys_newton_work.restype = ctypes.c_int
-            fn = lib.mechsys_corrector
-            fn.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_int, ctypes.c_int,
-                           ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p]
-            fn.restype = ctypes.c_int
-            lib.mechsys_corrector_work.argtypes = [ctypes.c_int] * 5
-            lib.mechsys_corrector_work.restype = ctypes.c_int
-            fn = lib.mechsys_linearize
-            fn.argtypes = [ctypes.c_void_p] * 10
-            fn.restype = ctypes.c_int
-            lib.mechsys_linearize_work.argtypes = [ctypes.c_int] * 5
-            lib.mechsys_linearize_work.restype = ctypes.c_int
-        _newton_lib[cc] = lib
+    with _NEWTON_LOCK:  # one build, however many threads ask (prepare_newton's and the caller's)
+        if cc not in _newton_lib:
+            _newton_lib[cc] = _load_newton()
     return _newton_lib[cc]
+
+
+def _load_newton() -> Optional[ctypes.CDLL]:
+    """newton.c's library from the cache, or built now and stored; its functions' signatures declared."""
+    import hashlib
+
+    from mechsys.numeric import cache
+
+    source = NEWTON.read_text(encoding="utf-8")
+    digest = hashlib.sha256(source.encode()).hexdigest()[:16]
+    key = f"newton-{sys.platform}-{platform.machine()}-{digest}"
+    path = cache.library(key)
+    lib = None
+    try:
+        if path is None:
+            with tempfile.TemporaryDirectory(prefix="mechsys-newton-") as tmp:
+                built = Path(tmp) / f"{key}.so"
+                build(source, built)
+                path = cache.store_library(key, built)
+                lib = ctypes.CDLL(str(path or built))  # loaded before the temporary folder goes
+        else:
+            lib = ctypes.CDLL(str(path))
+    except (AnalysisError, OSError):
+        lib = None
+    if lib is not None:
+        fn = lib.mechsys_deflated_newton
+        fn.argtypes = ([ctypes.c_void_p, ctypes.c_void_p, ctypes.c_int, ctypes.c_void_p, ctypes.c_void_p]
+                       + [ctypes.c_int] * 4 + [ctypes.c_void_p] * 3 + [ctypes.c_int, ctypes.c_void_p, ctypes.c_int]
+                       + [ctypes.c_void_p] * 2)
+        fn.restype = ctypes.c_int
+        lib.mechsys_newton_work.argtypes = [ctypes.c_int] * 5
+        lib.mechsys_newton_work.restype = ctypes.c_int
+        fn = lib.mechsys_corrector
+        fn.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_int, ctypes.c_int,
+                       ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p]
+        fn.restype = ctypes.c_int
+        lib.mechsys_corrector_work.argtypes = [ctypes.c_int] * 5
+        lib.mechsys_corrector_work.restype = ctypes.c_int
+        fn = lib.mechsys_linearize
+        fn.argtypes = [ctypes.c_void_p] * 10
+        fn.restype = ctypes.c_int
+        lib.mechsys_linearize_work.argtypes = [ctypes.c_int] * 5
+        lib.mechsys_linearize_work.restype = ctypes.c_int
+    return lib
 
 
 class CompiledNewton:

@@ -31,10 +31,11 @@ import sympy as sp
 from mechsys.analysis.equilibrium.equilibria import Equilibrium, EquilibriumProblem, wrap
 from mechsys.numeric.parameters import parameter_values
 from mechsys.errors import AnalysisError, InputError
+from mechsys.mechanics.dag import FreeSymbols
 from mechsys.mechanics.model import MechanicalModel
-from mechsys.numeric import native
-from mechsys.numeric.lambdify import (ForwardProgram, compile_exprs, function_from_source, generate_source,
-                                       value_and_jacobian_program, value_and_jacobian_sources)
+from mechsys.numeric import native, tangents
+from mechsys.numeric.lambdify import (ForwardProgram, compile_exprs, differentiate_program, function_from_source,
+                                       generate_source, shared_program, value_and_jacobian_sources)
 
 #: relative size below which a column, a singular value or a shift difference counts as zero
 ZERO = 1e-9
@@ -60,6 +61,8 @@ class ConstrainedPieces:
         n = self.n
         self.layout = {"E": (0, (self.size, 1)), "M": (self.size, (n, n)), "A": (self.size + n * n, (self.m, n))}
         self._outputs = self.size + n * n + self.m * n
+        # the search's compiled Newton, built (once per machine) on the other core beside this symbolic work
+        native.prepare_newton()
         key = cache.model_key(model, f"constrained-pieces-{method}")
         entry = cache.load(key)
         if not self._usable(entry, model):
@@ -108,32 +111,39 @@ class ConstrainedPieces:
 
     def _expressions(self, model: MechanicalModel, method: str) -> tuple[list, list, ForwardProgram]:
         """The outputs E (R; S; g; Phi), M, A at t = 0, the arguments (q, u, a, lambda, p), and their program (one
-        CSE, forward differentiation of its graph for dE/d(q, u))."""
+        CSE; the derivatives dE/d(q, u) are formed by whoever prints it)."""
         eq = model.equations(method)
         rows = model.kin.constraints
         t0 = {model.t: 0}
         R, S = saddle_residuals(eq.M, eq.f, eq.A, eq.b, model.a, self.lam)
         g = [r.velocity for r in rows]
         Phi = [r.position for r in rows if r.kind == "holonomic"]
-        outputs = [sp.sympify(e).xreplace(t0) for e in list(R) + list(S) + g + Phi + list(eq.M) + list(eq.A)]
+        outputs = [sp.sympify(e) for e in list(R) + list(S) + g + Phi + list(eq.M) + list(eq.A)]
+        if model.t in FreeSymbols().of_all(outputs):  # each shared node once (xreplace walks every path)
+            outputs = [e.xreplace(t0) for e in outputs]
         args = [*model.q, *model.u, *model.a, *self.lam, *model.parameter_symbols]
-        return outputs, args, value_and_jacobian_program(outputs, args, [*model.q, *model.u], rows=self.size)
+        return outputs, args, shared_program(outputs, args, [*model.q, *model.u])
 
     def _python_sources(self, outputs: list, args: list, program: ForwardProgram) -> dict:
         """Python sources of E alone (what a line search evaluates, its own CSE) and of E, M, A followed by
-        dE/d(q, u) row by row."""
-        _values, source = value_and_jacobian_sources(outputs, args, args[:2 * self.n], program=program)
+        dE/d(q, u) row by row (differentiated symbolically: lambdify.differentiate_program)."""
+        wrt = args[:2 * self.n]
+        _values, source = value_and_jacobian_sources(outputs, args, wrt,
+                                                     program=differentiate_program(program, wrt, self.size))
         return {"source": source, "values": generate_source(outputs[:self.size], args)}
 
     def _generate(self, model: MechanicalModel, method: str) -> dict:
         """The cache entry: the C source of the program (None when an expression has no C form) and, unless a C
         compiler is there to build it, the Python sources; which parameters E reads; whether it is autonomous."""
         outputs, args, program = self._expressions(model, method)
-        c_source = native.program_source(program, {"mechsys_values": (self.size, False),
-                                                   "mechsys_full": (len(outputs), True)})
+        wrt, functions = args[:2 * self.n], {"mechsys_values": (self.size, False), "mechsys_full": (len(outputs), True)}
+        # the tangents printed straight to C (numeric/tangents.py); a node without a rule there: sympy's derivatives
+        c_source = tangents.program_source(program, wrt, self.size, functions)
+        if c_source is None:
+            c_source = native.program_source(differentiate_program(program, wrt, self.size), functions)
         python = ({"source": None, "values": None} if c_source is not None and native.compiler() is not None
                   else self._python_sources(outputs, args, program))
-        used = set().union(*(e.free_symbols for e in outputs[:self.size]))
+        used = FreeSymbols().of_all(outputs[:self.size])
         return {"size": self.size, "c": c_source, **python, "autonomous": model.is_autonomous(method),
                 "read": [s in used for s in model.parameter_symbols]}
 
