@@ -31,8 +31,8 @@ def _matrices(model: MechanicalModel):
     except (KeyError, TypeError, ValueError, SyntaxError):
         pass  # another format: derive again
     args = (model.t, model.q, model.u, model.parameter_symbols)
-    desc = {"A": matrix_source(model.constraint_jacobian, *args),
-            "M": matrix_source(model.equations(INTERNAL_METHOD).M, *args)}
+    desc = {"A": matrix_source(model.constraint_jacobian, *args, light=True),  # evaluated at three states
+            "M": matrix_source(model.equations(INTERNAL_METHOD).M, *args, light=True)}
     cache.store(key, desc)
     return matrix_from_source(desc["A"]), matrix_from_source(desc["M"])
 

@@ -103,7 +103,8 @@ class _Shifts:
 
         self.model = model
         self.fns = None
-        self._compile = lambda: [compile_matrix(m, model.t, model.q, model.u, model.parameter_symbols) for m in parts]
+        self._compile = lambda: [compile_matrix(m, model.t, model.q, model.u, model.parameter_symbols, light=True)
+                                 for m in parts]  # evaluated at a few states only
 
     def independent(self, i: int, p: np.ndarray) -> bool:
         if self.fns is None:
