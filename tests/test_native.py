@@ -168,6 +168,39 @@ def test_native_library_is_cached_between_processes(tmp_path):
     assert list(tmp_path.glob("*.so"))
 
 
+def test_a_build_started_early_gives_the_library_built_late(monkeypatch, tmp_path):
+    """native.start compiles in the background while simulate generates its Python code; load() takes that
+    library: stored in the cache, computing what the Python path computes. A build nobody takes is stopped and its
+    files removed (at exit)."""
+    monkeypatch.setenv("MECHSYS_CACHE", str(tmp_path / "cache"))
+    monkeypatch.setenv("TMPDIR", str(tmp_path))
+    import tempfile
+
+    monkeypatch.setattr(tempfile, "tempdir", None)
+    def fresh(name):  # not the session's shared models: this test sets their compiled code
+        return mechsys.load(SYSTEMS_DIR / f"{name}.yaml")
+
+    model = fresh("double_pendulum")
+    native.start(model)
+    assert model._native_pending is not None
+    early = native.load(model)
+    assert early is not None and not getattr(early, "from_cache", False) and early.key is not None
+    assert not hasattr(model, "_native_pending") and not native._UNFINISHED
+    c = compile_model(model)
+    p = parameter_values(model)
+    y = np.array([0.3, -0.2, 0.5, 0.1])
+    rhs = RightHandSide(c, p)
+    np.testing.assert_allclose(early.accelerations(0.0, y, p), rhs(0.0, y)[2:], rtol=1e-12, atol=1e-12)
+    again = fresh("double_pendulum")
+    native.start(again)  # cached now: nothing to start
+    assert getattr(again, "_native_pending", None) is None and native.load(again).from_cache
+    other = fresh("cart_pendulum")
+    native.start(other)
+    assert native._UNFINISHED
+    native._abandon()
+    assert not native._UNFINISHED and not list(tmp_path.glob("mechsys-native-*"))
+
+
 def test_redundant_constraints_fall_back_to_least_squares_with_a_warning(tmp_path):
     """Two proportional constraint rows make [[M, A^T], [A, 0]] singular: the compiled LU stops, auto says so and
     finishes with the least-squares (SVD) solve of the scipy path; --method native reports the reason."""

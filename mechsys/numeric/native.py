@@ -7,6 +7,7 @@ Python call. benchmarks/simulate_anchor.py measures it. The compiler is optional
 MECHSYS_NATIVE=off) `auto` falls back to scipy's DOP853, which takes the same steps."""
 from __future__ import annotations
 
+import atexit
 import ctypes
 import os
 import platform
@@ -207,20 +208,44 @@ def model_source(model) -> str:
 def build(source: str, target: Path, opt: str | None = None) -> None:
     """Compile ``source`` into the shared library ``target`` (atomically: a partial file never appears) at the
     optimisation level ``opt`` (by default -O2, -O1 for very long sources)."""
-    cc = compiler()
-    if cc is None:
-        raise AnalysisError("no C compiler found for the native integrator (set CC or use --method DOP853)")
-    with tempfile.TemporaryDirectory(dir=target.parent) as tmp:
-        c_file = Path(tmp) / "model.c"
+    PendingBuild(source, target, opt).finish()
+
+
+class PendingBuild:
+    """The C compiler running on ``source`` in its own process (started here); ``finish()`` waits for it and
+    moves the library to ``target`` (AnalysisError when it failed). Meanwhile the caller's Python work runs on
+    the other core: a first `simulate` generates its Python code while its integrator compiles."""
+
+    def __init__(self, source: str, target: Path, opt: str | None = None) -> None:
+        cc = compiler()
+        if cc is None:
+            raise AnalysisError("no C compiler found for the native integrator (set CC or use --method DOP853)")
+        self.target = target
+        self._tmp = tempfile.TemporaryDirectory(dir=target.parent)
+        c_file = Path(self._tmp.name) / "model.c"
         c_file.write_text(source, encoding="utf-8")
-        so_file = Path(tmp) / "model.so"
+        self._so = Path(self._tmp.name) / "model.so"
         opt = opt or ("-O2" if len(source) < 2_000_000 else "-O1")
-        proc = subprocess.run([cc, opt, "-std=gnu99", "-fPIC", "-shared", "-o", str(so_file), str(c_file), "-lm"],
-                              capture_output=True, text=True)
-        if proc.returncode != 0:
-            first = (proc.stderr.strip().splitlines() or ["unknown error"])[0]
-            raise AnalysisError(f"compiling the native integrator failed: {first}")
-        os.replace(so_file, target)
+        self._proc = subprocess.Popen([cc, opt, "-std=gnu99", "-fPIC", "-shared", "-o", str(self._so), str(c_file),
+                                       "-lm"], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+
+    def finish(self) -> Path:
+        try:
+            _, err = self._proc.communicate()
+            if self._proc.returncode != 0:
+                first = (err.strip().splitlines() or ["unknown error"])[0]
+                raise AnalysisError(f"compiling the native integrator failed: {first}")
+            os.replace(self._so, self.target)
+        finally:
+            self._tmp.cleanup()
+        return self.target
+
+    def cancel(self) -> None:
+        """Stop the compiler (the process exits without its result) and remove the temporary files."""
+        if self._proc.poll() is None:
+            self._proc.kill()
+        self._proc.communicate()
+        self._tmp.cleanup()
 
 
 @dataclass
@@ -309,11 +334,48 @@ class NativeIntegrator:
                          float(counters[3]), float(counters[4]))
 
 
+def start(model) -> None:
+    """Start compiling the model's native integrator (when a compiler is there and the library is not cached), so
+    that the compiler runs while the caller generates its Python code; load() takes the result."""
+    from mechsys.numeric import cache
+
+    if compiler() is None or getattr(model, "_native_integrator", False) is not False \
+            or getattr(model, "_native_pending", None) is not None:
+        return
+    key = _native_key(model)
+    if cache.library(key) is not None:
+        return
+    tmp = tempfile.TemporaryDirectory(prefix="mechsys-native-")
+    pending = PendingBuild(model_source(model), Path(tmp.name) / f"{key}.so")
+    model._native_pending = (key, tmp, pending)
+    if not _UNFINISHED:
+        atexit.register(_abandon)
+    _UNFINISHED[id(pending)] = (tmp, pending)
+
+
+#: builds start() began that load() has not finished, by id: stopped at exit (no compiler left behind, no files)
+_UNFINISHED: dict[int, tuple] = {}
+
+
+def _abandon() -> None:
+    for tmp, pending in list(_UNFINISHED.values()):
+        pending.cancel()
+        tmp.cleanup()
+    _UNFINISHED.clear()
+
+
+def _native_key(model) -> str:
+    from mechsys.numeric import cache
+
+    # the library is machine code: the key names the platform as well as the model structure
+    return cache.model_key(model, f"native-{sys.platform}-{platform.machine()}")
+
+
 def load(model) -> Optional[NativeIntegrator]:
-    """The model's native integrator, from the cache (only when its signature verifies) or compiled now; None
-    when no compiler is available. Without a usable cache the library is built in a temporary folder that is
-    removed once it is loaded. With constraints the accelerations solve [[M, A^T], [A, 0]] [q''; -lambda] = [f; b];
-    the caller projects."""
+    """The model's native integrator, from the cache (only when its signature verifies), from start()'s build, or
+    compiled now; None when no compiler is available. Without a usable cache the library is built in a temporary
+    folder that is removed once it is loaded. With constraints the accelerations solve
+    [[M, A^T], [A, 0]] [q''; -lambda] = [f; b]; the caller projects."""
     from mechsys.numeric import cache
 
     cached = getattr(model, "_native_integrator", False)
@@ -321,17 +383,22 @@ def load(model) -> Optional[NativeIntegrator]:
         return cached
     result = None
     if compiler() is not None:
-        # the library is machine code: the key names the platform as well as the model structure
-        key = cache.model_key(model, f"native-{sys.platform}-{platform.machine()}")
-        path = cache.library(key)
+        held = model.__dict__.pop("_native_pending", None)
+        key = _native_key(model) if held is None else held[0]
+        path = cache.library(key) if held is None else None
         if path is not None:
             result = NativeIntegrator(path)
             result.from_cache = True
         else:
-            source = model_source(model)
-            with tempfile.TemporaryDirectory(prefix="mechsys-native-") as tmp:
-                built = Path(tmp) / f"{key}.so"
-                build(source, built)
+            tmp, pending = held[1:] if held is not None else (
+                tempfile.TemporaryDirectory(prefix="mechsys-native-"), None)
+            with tmp:
+                built = Path(tmp.name) / f"{key}.so"
+                if pending is None:
+                    build(model_source(model), built)
+                else:
+                    _UNFINISHED.pop(id(pending), None)
+                    pending.finish()
                 path = cache.store_library(key, built)
                 result = NativeIntegrator(path or built)  # loaded before the temporary folder goes
         result.key = key if path is not None else None
