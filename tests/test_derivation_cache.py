@@ -46,6 +46,26 @@ def test_cached_equations_equal_derived_ones(name, cache_dir, monkeypatch):
         assert model.kinetic_energy == want[-2] and model.potential_energy == want[-1]
 
 
+@pytest.mark.parametrize("first, then", [("kane", "lagrange"), ("lagrange", "kane")])
+@pytest.mark.parametrize("name", ["four_bar", "rolling_disk", "slider_crank"])
+def test_a_formulation_derived_after_the_other_equals_one_derived_alone(name, first, then, cache_dir,
+                                                                       monkeypatch):
+    """A model with constraints takes A, b, T, V and Q from the other formulation's stored entry (mechanics/model.py
+    equations): the same expressions as a derivation on an empty cache, and A and b are not derived again."""
+    path = ROOT / "systems" / f"{name}.yaml"
+    monkeypatch.setenv("MECHSYS_CACHE", "off")
+    alone = parts(mechsys.load(path).equations(then))
+    monkeypatch.setenv("MECHSYS_CACHE", str(cache_dir))
+    mechsys.load(path).equations(first)
+    model = mechsys.load(path)
+    assert model.kin.constraints
+    after = parts(model.equations(then))
+    assert after == alone
+    assert first in model._eqs  # the other entry was read ...
+    # ... and the constraint rows came from it: the objects the loaded formulation holds
+    assert model.constraint_jacobian is model._eqs[first].A and model.constraint_rhs is model._eqs[first].b
+
+
 def test_a_change_of_structure_is_a_miss_and_a_change_of_value_a_hit(tmp_path, cache_dir, monkeypatch):
     text = (ROOT / "systems" / "double_pendulum.yaml").read_text()
     first = tmp_path / "a.yaml"

@@ -299,6 +299,12 @@ class MechanicalModel:
 
             eq = derivations.load(self, method)
             if eq is None:
+                if self.kin.constraints:  # A and b (and T, V, Q) from another formulation's stored entry, if any
+                    for other in METHODS:
+                        if other != method and other not in self._eqs:
+                            self._eqs[other] = derivations.load(self, other)
+                            if self._eqs[other] is None:
+                                del self._eqs[other]
                 M, f = self._lagrange() if method == "lagrange" else self._kane()
                 eq = Equations(method, self.coordinates, self.q, self.u, self.a, M, f, self.generalized_forces,
                                self.kinetic_energy, self.potential_energy, self.constraint_jacobian,
