@@ -7,6 +7,7 @@ from typing import Any
 import numpy as np
 import sympy as sp
 
+from mechsys.mechanics.dag import value as dag_value
 from mechsys.mechanics.differentiate import Differentiator
 from mechsys.mechanics.kinematics import AXES, FrameState, unit
 from mechsys.model.expressions import names_in
@@ -663,10 +664,13 @@ def _identically_zero(expr: sp.Expr, values: dict) -> bool:
     for _ in range(4):
         subs = {s: values.get(s, rng.uniform(-1.3, 1.7)) for s in symbols}
         try:
-            # machine-precision substitution first (20x faster than evalf on a rolling row): a value far from 0
-            # settles it; a small one is re-evaluated with evalf's adaptive precision (cancellation)
-            rough = expr.xreplace({s: sp.Float(v) for s, v in subs.items()})
-            if rough.is_Number and abs(complex(rough)) > 1e-6:
+            # machine precision first (dag.value, each shared node once): a value far from 0 settles it; a small
+            # one is re-evaluated with evalf's adaptive precision (cancellation)
+            rough = dag_value(expr, subs)
+            if rough is None:  # outside the floats' reach: sympy's Floats
+                rough = expr.xreplace({s: sp.Float(v) for s, v in subs.items()})
+                rough = complex(rough) if rough.is_Number else 0.0
+            if abs(rough) > 1e-6:
                 return False
             val = complex(expr.evalf(subs=subs))
         except (TypeError, ValueError):

@@ -1,11 +1,13 @@
-"""Walks of expression DAGs that visit each shared subexpression once: the free symbols of derived equations.
+"""Walks of expression DAGs that visit each shared subexpression once: the free symbols of derived equations, and
+their value in floating point.
 
 sympy's ``free_symbols`` unions the free symbols of every argument again at every use of a shared subtree (derived
 equations are DAGs: a bicycle's M and f share most of theirs), so asking it for each entry of M, f, A and b, and
 again per coordinate, walked the trees dozens of times (the cyclic-coordinate decision of a cold `info`)."""
 from __future__ import annotations
 
-from typing import Iterable
+import math
+from typing import Iterable, Mapping, Optional
 
 import sympy as sp
 
@@ -46,3 +48,53 @@ class FreeSymbols:
     def of_all(self, exprs: Iterable[sp.Basic]) -> frozenset:
         """The union over ``exprs`` (the entries of matrices, say)."""
         return frozenset().union(*(self.of(e) for e in exprs))
+
+
+#: the functions value() evaluates, by sympy type
+_MATH = {sp.sin: math.sin, sp.cos: math.cos, sp.tan: math.tan, sp.asin: math.asin, sp.acos: math.acos,
+         sp.atan: math.atan, sp.sinh: math.sinh, sp.cosh: math.cosh, sp.tanh: math.tanh, sp.exp: math.exp,
+         sp.log: math.log, sp.Abs: abs, sp.sign: lambda x: float((x > 0) - (x < 0))}
+
+
+def value(expr: sp.Basic, values: Mapping[sp.Symbol, float]) -> Optional[float]:
+    """``expr`` in machine floating point with ``values`` for its symbols, each shared node computed once (a
+    rolling constraint's row, which xreplace with Floats walks path by path: a tenth of the time); None when a
+    symbol has no value, a node is not a sum, product, power, number or elementary function, or a step leaves
+    the reals (a domain error, an overflow): the caller then asks sympy."""
+    root = sp.sympify(expr)
+    memo: dict[int, float] = {}
+    stack = [root]
+    try:
+        while stack:  # iterative post-order: a deep product never reaches Python's recursion limit
+            node = stack[-1]
+            if id(node) in memo:
+                stack.pop()
+                continue
+            if node.is_Symbol:
+                memo[id(node)] = float(values[node])
+            elif node.is_Number or node.is_NumberSymbol:
+                memo[id(node)] = float(node)
+            else:
+                waiting = [a for a in node.args if id(a) not in memo]
+                if waiting:
+                    stack.extend(waiting)
+                    continue
+                args = [memo[id(a)] for a in node.args]
+                if node.is_Add:
+                    result = math.fsum(args)
+                elif node.is_Mul:
+                    result = math.prod(args)
+                elif node.is_Pow:
+                    result = math.pow(args[0], args[1])
+                elif type(node) is sp.atan2:
+                    result = math.atan2(args[0], args[1])
+                elif type(node) in _MATH and len(args) == 1:
+                    result = _MATH[type(node)](args[0])
+                else:
+                    return None
+                memo[id(node)] = result
+            stack.pop()
+    except (KeyError, ValueError, OverflowError, ZeroDivisionError, TypeError):
+        return None
+    result = memo[id(root)]
+    return result if math.isfinite(result) else None

@@ -1,0 +1,66 @@
+"""mechanics/dag.value: an expression DAG in machine floating point, each shared node once. Checked against
+sympy's evalf on random expressions, and through the builder's value-dependent decisions (mechanics/build.py
+_identically_zero), which must come out as with sympy's Floats on every bundled model."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import sympy as sp
+
+import mechsys
+from mechsys.mechanics import build
+from mechsys.mechanics.dag import value
+
+ROOT = Path(__file__).resolve().parents[1]
+x, y, z = sp.symbols("x y z", real=True)
+
+
+def _draw(rng, depth):
+    atoms = [x, y, z, sp.Integer(3), sp.Rational(-2, 7), sp.Float(0.3), sp.pi, sp.E]
+    unary = [sp.sin, sp.cos, sp.tan, sp.atan, sp.exp, sp.Abs, sp.tanh, sp.sinh, sp.cosh, sp.sign,
+             lambda e: sp.sqrt(e ** 2 + 1), lambda e: sp.log(e ** 2 + 2), lambda e: sp.asin(sp.tanh(e) / 2),
+             lambda e: sp.acos(sp.tanh(e) / 3)]
+    if depth == 0 or rng.random() < 0.15:
+        return atoms[rng.integers(len(atoms))]
+    a, b = _draw(rng, depth - 1), _draw(rng, depth - 1)
+    return [a + b, a * b * x - y, a / (b ** 2 + 1), a ** int(rng.integers(-3, 5)),
+            unary[rng.integers(len(unary))](a) + b, sp.atan2(a, b ** 2 + 1) * y,
+            (a ** 2 + 1) ** (sp.sin(b) / 2)][rng.integers(7)]
+
+
+def test_value_equals_evalf_on_random_expressions():
+    rng = np.random.default_rng(12)
+    compared = 0
+    for _ in range(200):
+        e = _draw(rng, 4)
+        e = e * e + e  # a shared subtree
+        point = dict(zip((x, y, z), rng.uniform(-1.5, 1.5, 3)))
+        want = complex(e.evalf(subs=point))
+        got = value(e, point)
+        if got is None:
+            assert not (np.isfinite(want.real) and abs(want.imag) < 1e-12 * max(1, abs(want)))
+            continue
+        assert got == pytest.approx(want.real, rel=1e-9, abs=1e-9) and abs(want.imag) <= 1e-9 * max(1, abs(want))
+        compared += 1
+    assert compared > 150
+
+
+@pytest.mark.parametrize("expr", [sp.sqrt(-1 - x ** 2), sp.log(-1 - x ** 2), 1 / (x - x.subs(x, 0.25)),
+                                  sp.Function("g")(x), sp.Piecewise((x, x > 0), (0, True)), x + sp.I])
+def test_what_leaves_the_reals_or_the_rules_is_none(expr):
+    assert value(expr, {x: 0.25}) is None
+
+
+def test_a_symbol_without_a_value_is_none():
+    assert value(x + y, {x: 1.0}) is None
+
+
+@pytest.mark.parametrize("name", sorted(p.stem for p in (ROOT / "systems").glob("*.yaml")))
+def test_the_builders_decisions_are_sympys(name, monkeypatch):
+    monkeypatch.setenv("MECHSYS_CACHE", "off")
+    path = ROOT / "systems" / f"{name}.yaml"
+    fast = [d[3] for d in mechsys.load(path).kin.decisions]
+    monkeypatch.setattr(build, "dag_value", lambda expr, values: None)  # sympy's Floats only
+    assert [d[3] for d in mechsys.load(path).kin.decisions] == fast
