@@ -277,6 +277,21 @@ def test_a_domain_error_in_a_closed_loop_is_one_reasoned_line(native, tmp_path, 
     assert "integration failed at t =" in err or "left the constraint manifold" in err
 
 
+def test_a_released_drive_that_is_not_real_at_t0_is_an_input_error(tmp_path):
+    """Found by the rotating-seed CLI fuzz (seed 20261126080703): `inverse` releases the prescribed coordinates
+    and starts them at the drive's value at t = 0; a crank a billion times the rod makes that value complex, and
+    float() raised a TypeError: an internal error. Now one line naming the file, line and key, exit 2."""
+    text = (DATA / "overdriven_slider_crank.yaml").read_text()
+    path = tmp_path / "huge.yaml"
+    path.write_text(text.replace("a: 0.2", "a: 1000000000.0"))
+    assert "a: 1000000000.0" in path.read_text()
+    result = invoke("inverse", path, "--at", "0.3")
+    err = result.stderr.strip()
+    assert result.exit_code == 2 and len(err.splitlines()) == 1, (result.exit_code, err)
+    assert err.startswith("huge.yaml:") or "huge.yaml:" in err
+    assert "coordinates.x4.prescribed: does not evaluate to a finite real number at t = 0" in err
+
+
 def test_generated_code_outside_a_math_domain_gives_nan_like_numpy():
     from mechsys.numeric.runtime import call_generated, function_from_source
 

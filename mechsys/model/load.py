@@ -389,9 +389,9 @@ def _resolve_symbols(doc: Document, release_prescribed: bool = False) -> None:
             doc.coords[name] = sp.Symbol(name, real=True)
             doc.rates[name] = rate_symbol(name)
             doc.accels[name] = accel_symbol(name)
-            values = {k: sp.Float(v) for k, v in doc.numeric_parameters().items()}
-            doc.initial[name] = float(motion.xreplace(values).xreplace({T: 0}).evalf())
-            doc.initial_rate[name] = float(sp.diff(motion, T).xreplace(values).xreplace({T: 0}).evalf())
+            path = ("coordinates", name, "prescribed")
+            doc.initial[name] = _real(doc, motion.xreplace({T: 0}), path, " at t = 0")
+            doc.initial_rate[name] = _real(doc, sp.diff(motion, T).xreplace({T: 0}), path, " (its rate) at t = 0")
         else:
             doc.coords[name] = sp.Symbol(name, real=True)
             doc.rates[name] = rate_symbol(name)
@@ -401,15 +401,19 @@ def _resolve_symbols(doc: Document, release_prescribed: bool = False) -> None:
 
 
 def _numeric(doc: Document, value: Any, path: Path) -> float:
-    expr = doc.parse(value, path, "initial")
+    return _real(doc, doc.parse(value, path, "initial"), path)
+
+
+def _real(doc: Document, expr: sp.Expr, path: Path, where: str = "") -> float:
+    """``expr`` with the file's parameter values: a finite real number, or an input error at ``path``."""
     try:
         used = expr.free_symbols
         values = {doc.parameters[n]: sp.Float(v) for n, v in doc.parameter_values.items() if doc.parameters[n] in used}
         out = complex(sp.sympify(expr.xreplace(values)).evalf())
     except (TypeError, ValueError):
-        raise doc.error(path, "does not evaluate to a number") from None
+        raise doc.error(path, f"does not evaluate to a number{where}") from None
     if abs(out.imag) > 1e-12 * max(1.0, abs(out.real)) or out.real != out.real or abs(out.real) == float("inf"):
-        raise doc.error(path, "does not evaluate to a finite real number")
+        raise doc.error(path, f"does not evaluate to a finite real number{where}")
     return out.real
 
 
