@@ -343,7 +343,10 @@ def start(model) -> None:
             or getattr(model, "_native_pending", None) is not None:
         return
     key = _native_key(model)
-    if cache.library(key) is not None:
+    path = cache.library(key)
+    if path is not None:  # built before: taken now (load() then computes no key again)
+        model._native_integrator = NativeIntegrator(path)
+        model._native_integrator.from_cache, model._native_integrator.key = True, key
         return
     tmp = tempfile.TemporaryDirectory(prefix="mechsys-native-")
     pending = PendingBuild(model_source(model), Path(tmp.name) / f"{key}.so")

@@ -775,7 +775,8 @@ def simulate(model: MechanicalModel, t_end: float, dt: float | None = None, meth
 
     timings = {}
     t0 = time.perf_counter()
-    if method in ("auto", "native") and not model.events and not any(c["gap"] is not None for c in model.kin.contacts):
+    if method in ("auto", "native") and getattr(model, "_simulation_compiled", None) is None \
+            and not model.events and not any(c["gap"] is not None for c in model.kin.contacts):
         from mechsys.numeric import native
 
         native.start(model)  # the integrator compiles (its own process) while compile_model generates Python
