@@ -68,3 +68,61 @@ def test_a_remembered_source_is_the_source_generated_afresh_for_the_same_express
     for k in range(L._RECENT_SIZE + 1):  # bounded: the oldest is forgotten
         L.generate_source([x + k], [x])
     assert len(L._RECENT) == L._RECENT_SIZE and (tuple(exprs), (x, y, a)) not in L._RECENT
+
+
+def test_the_direct_python_printer_computes_what_sympys_printer_computes():
+    """lambdify._Printer prints sums, products, powers and numbers itself (sympy's printer sorts every sum):
+    random expressions of those nodes, of the elementary functions around them and of some nodes it leaves to
+    sympy (Piecewise, Mod, sign, atan2), printed both ways, give the same numbers."""
+    import math
+
+    import sympy as sp
+    from sympy.printing.pycode import PythonCodePrinter
+
+    from mechsys.numeric import lambdify as L
+    from mechsys.numeric.runtime import function_from_source
+
+    x, y, z = sp.symbols("x y z", real=True)
+    rng = np.random.default_rng(21)
+    atoms = [x, y, z, sp.Integer(3), sp.Integer(-2), sp.Rational(-2, 7), sp.Float(0.3), sp.Float(1 / 3),
+             sp.Float(-1.25e-3), sp.pi]
+    unary = [sp.sin, sp.cos, sp.atan, sp.exp, sp.Abs, sp.tanh, sp.sign, lambda e: sp.sqrt(e ** 2 + 1),
+             lambda e: 1 / sp.sqrt(e ** 2 + 2), lambda e: sp.log(e ** 2 + 2)]
+
+    def draw(depth):
+        if depth == 0 or rng.random() < 0.2:
+            return atoms[rng.integers(len(atoms))]
+        a, b = draw(depth - 1), draw(depth - 1)
+        return [a + b, a * b - x, a / (b ** 2 + 1), a ** int(rng.integers(-3, 6)), -a * b / 7,
+                unary[rng.integers(len(unary))](a) + b, sp.atan2(a, b ** 2 + 1) * y,
+                (a ** 2 + 1) ** sp.Rational(3, 2), (a ** 2 + 1) ** (b ** 2 / 3),
+                sp.Mod(a, 3) + sp.Piecewise((a, b > 0), (-b, True))][rng.integers(10)]
+
+    exprs = [draw(4) for _ in range(80)]
+    names = {x: "a0", y: "a1", z: "a2"}
+    fast = L._Printer(names)
+
+    class Sympys(PythonCodePrinter):
+        def _print_Symbol(self, e):
+            return names[e]
+
+    plain = Sympys({"fully_qualified_modules": True, "inline": True, "allow_unknown_functions": False})
+    texts = {which: [printer.doprint(e) for e in exprs] for which, printer in (("fast", fast), ("sympy", plain))}
+    assert texts["fast"] != texts["sympy"]
+    fns = {which: [function_from_source(f"def _f(a0, a1, a2):\n    return [{text}]") for text in t]
+           for which, t in texts.items()}
+    compared = 0
+    for point in np.random.default_rng(22).uniform(-2, 2, (20, 3)):
+        for k in range(len(exprs)):
+            got = []
+            for which in ("fast", "sympy"):
+                try:
+                    got.append(complex(fns[which][k](*map(float, point))[0]))
+                except (ValueError, ZeroDivisionError, OverflowError):
+                    got.append(None)
+            if got[1] is None or not math.isfinite(abs(got[1])):
+                continue
+            # (sympy prints a Float's 15 digits, mechsys its double exactly: round-off apart after cancellations)
+            assert got[0] is not None and abs(got[0] - got[1]) <= 1e-9 * max(1.0, abs(got[1])), (exprs[k], got)
+            compared += 1
+    assert compared > 1000

@@ -4,6 +4,7 @@ sympy.lambdify walks the whole (unshared) expression tree several times to find 
 dominates for the long expressions of a chain; here CSE runs once and only its small results are printed."""
 from __future__ import annotations
 
+import math
 from collections import OrderedDict
 from dataclasses import dataclass
 from typing import Callable, Sequence
@@ -20,7 +21,11 @@ __all__ = ["generate_source", "compile_exprs", "matrix_source", "compile_matrix"
 
 
 class _Printer(PythonCodePrinter):
-    """Python source with positional argument names a0, a1, ... for the input symbols."""
+    """Python source with positional argument names a0, a1, ... for the input symbols. Sums, products, powers and
+    numbers are printed directly, in the expression's own argument order and fully parenthesized (sympy's
+    printer orders the terms of every sum and weighs precedence: most of a generated source's printing time);
+    everything else by sympy's printer. Rationals print as a quotient of exact integers and Floats as their
+    double's repr, so the numbers are the expression's own to the last bit."""
 
     def __init__(self, names: dict[sp.Symbol, str]) -> None:
         super().__init__({"fully_qualified_modules": True, "inline": True, "allow_unknown_functions": False})
@@ -30,6 +35,49 @@ class _Printer(PythonCodePrinter):
         return self._names.get(expr) or super()._print_Symbol(expr)
 
     _print_Dummy = _print_Symbol
+
+    def _operand(self, e: sp.Basic) -> str:
+        """``e`` printed as an operand of +, * or /: parenthesized unless printed here (sympy prints Mod as
+        ``a % b`` and Piecewise as ``x if c else y``, which bind differently)."""
+        text = self._print(e)
+        return text if e.is_Symbol or e.is_Number or e.is_Add or e.is_Mul or e.is_Pow else f"({text})"
+
+    def _print_Add(self, expr: sp.Add, order=None) -> str:
+        return "(" + " + ".join(self._operand(a) for a in expr.args) + ")"
+
+    def _print_Mul(self, expr: sp.Mul) -> str:
+        num, den = [], []
+        for a in expr.args:
+            if a.is_Pow and a.exp.is_Integer and a.exp < 0:
+                den.append(self._operand(a.base) if a.exp == -1 else self._operand(sp.Pow(a.base, -a.exp)))
+            elif a.is_Rational and not a.is_Integer:
+                num.append(str(a.p))
+                den.append(str(a.q))
+            else:
+                num.append(self._operand(a))
+        top = "*".join(num) if num else "1"
+        return f"({top}/({'*'.join(den)}))" if den else f"({top})"
+
+    def _print_Pow(self, expr: sp.Pow, rational=False) -> str:
+        base, exp = expr.args
+        if exp == sp.S.Half:
+            return f"math.sqrt({self._print(base)})"
+        if exp == -sp.S.Half:
+            return f"(1/math.sqrt({self._print(base)}))"
+        if exp.is_Integer:
+            return f"({self._print(base)})**{int(exp)}" if exp > 0 else f"({self._print(base)})**({int(exp)})"
+        return f"({self._print(base)})**({self._print(exp)})"
+
+    def _print_Integer(self, expr: sp.Integer) -> str:
+        value = int(expr)
+        return f"({value})" if value < 0 else str(value)
+
+    def _print_Rational(self, expr: sp.Rational) -> str:
+        return f"({expr.p}/{expr.q})"
+
+    def _print_Float(self, expr: sp.Float) -> str:
+        value = float(expr)
+        return f"({value!r})" if math.isfinite(value) else super()._print_Float(expr)
 
     def _print_DiracDelta(self, expr: sp.Expr) -> str:
         # derivative of sign(x) in |x| (e.g. a 1-D spring length): zero except at the singular point itself
