@@ -109,20 +109,8 @@ def _c_printer(names: dict, fast: bool = True):
                 top = "*".join(num) if num else "1.0"  # a product needs no parentheses: it is never a factor
                 return f"{top}/({'*'.join(den)})" if den else top  # (products are flat), and a base is wrapped
             if e.is_Pow:
-                x = e.exp
-                if x.is_Integer and 1 < abs(int(x)) <= 4:
-                    base = f"({fast(e.base)})"
-                    prod = "*".join([base] * abs(int(x)))
-                    return f"(1.0/({prod}))" if x < 0 else f"({prod})"
-                if x == -1:
-                    return f"(1.0/({fast(e.base)}))"
-                if x == sp.S.Half:
-                    return f"sqrt({fast(e.base)})"
-                if x == -sp.S.Half:
-                    return f"(1.0/sqrt({fast(e.base)}))"
-                if x.is_Integer:
-                    return f"pow({fast(e.base)}, {int(x)}.0)"
-                return self._print(e)
+                text = c_power(f"({fast(e.base)})", e.exp)
+                return text if text is not None else self._print(e)
             if e.is_Integer:
                 return f"({int(e)}.0)" if abs(int(e)) < exact else self._print(e)
             if e.is_Rational:
@@ -138,6 +126,22 @@ def _c_printer(names: dict, fast: bool = True):
             return self._print(e)
 
     return Printer()
+
+
+def c_power(base: str, x) -> Optional[str]:
+    """C text of ``base`` (a name or a parenthesized operand) to the sympy number ``x`` when x is an integer or
+    a half: exact products up to the fourth power (as Python's x**2 is), sqrt for halves; None otherwise."""
+    if x.is_Integer:
+        n = int(x)
+        if n == 1:
+            return base
+        if 1 < abs(n) <= 4:
+            prod = "*".join([base] * abs(n))
+            return f"(1.0/({prod}))" if n < 0 else f"({prod})"
+        return f"(1.0/{base})" if n == -1 else f"pow({base}, {n}.0)"
+    if x.is_Rational and x.q == 2 and abs(x.p) == 1:
+        return f"sqrt({base})" if x.p > 0 else f"(1.0/sqrt({base}))"
+    return None
 
 
 def pieces_source(exprs: Sequence, t, q: Sequence, u: Sequence, params: Sequence, name: str = "pieces") -> str:

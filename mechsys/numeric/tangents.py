@@ -15,6 +15,7 @@ from typing import Callable, Optional, Sequence
 import sympy as sp
 
 from mechsys.numeric.lambdify import ForwardProgram
+from mechsys.numeric.native import _c_printer, c_power
 
 
 class Unsupported(Exception):
@@ -44,8 +45,6 @@ class _Writer:
     """C statements of the tangents of one program (in the order they must run) and the text of each tangent."""
 
     def __init__(self, program: ForwardProgram, wrt: Sequence[sp.Symbol]) -> None:
-        from mechsys.numeric.native import _c_printer
-
         names = {a: f"a[{i}]" for i, a in enumerate(program.args)}
         names.update({sym: name for name, sym in program.symbols.items()})
         self.printer = _c_printer(names)
@@ -76,18 +75,8 @@ class _Writer:
 
     def power(self, base: str, c: sp.Number) -> str:
         """base**c as C text, with the numeric printer's exact products for small integers."""
-        if c == 1:
-            return base
-        if c.is_Integer and 1 < abs(int(c)) <= 4:
-            prod = "*".join([base] * abs(int(c)))
-            return f"(1.0/({prod}))" if c < 0 else f"({prod})"
-        if c == -1:
-            return f"(1.0/{base})"
-        if c == sp.S.Half:
-            return f"sqrt({base})"
-        if c == -sp.S.Half:
-            return f"(1.0/sqrt({base}))"
-        return f"pow({base}, {self.text(c)})"
+        text = c_power(base, c)
+        return text if text is not None else f"pow({base}, {self.text(c)})"
 
     def tan(self, e: sp.Basic) -> dict[int, str]:
         """The nonzero tangents of ``e`` by column, as C text."""
