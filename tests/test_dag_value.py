@@ -33,7 +33,7 @@ def _draw(rng, depth):
 def test_value_equals_evalf_on_random_expressions():
     rng = np.random.default_rng(12)
     compared = 0
-    for _ in range(200):
+    for _ in range(60):  # (evalf is the slow side: 60 expressions of depth 4 take a few seconds)
         e = _draw(rng, 4)
         e = e * e + e  # a shared subtree
         point = dict(zip((x, y, z), rng.uniform(-1.5, 1.5, 3)))
@@ -44,7 +44,7 @@ def test_value_equals_evalf_on_random_expressions():
             continue
         assert got == pytest.approx(want.real, rel=1e-9, abs=1e-9) and abs(want.imag) <= 1e-9 * max(1, abs(want))
         compared += 1
-    assert compared > 150
+    assert compared > 45
 
 
 @pytest.mark.parametrize("expr", [sp.sqrt(-1 - x ** 2), sp.log(-1 - x ** 2), 1 / (x - x.subs(x, 0.25)),
