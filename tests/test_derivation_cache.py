@@ -66,6 +66,26 @@ def test_a_formulation_derived_after_the_other_equals_one_derived_alone(name, fi
     assert model.constraint_jacobian is model._eqs[first].A and model.constraint_rhs is model._eqs[first].b
 
 
+@pytest.mark.parametrize("name", ["rolling_disk", "slider_crank"])
+def test_the_constraint_rows_are_read_from_a_stored_derivation(name, cache_dir, monkeypatch):
+    """`info` and `simulate` ask for A and b before any formulation: a stored one is read instead of deriving
+    them (the same expressions as with the cache off)."""
+    path = ROOT / "systems" / f"{name}.yaml"
+    monkeypatch.setenv("MECHSYS_CACHE", "off")
+    fresh = mechsys.load(path)
+    want = (fresh.constraint_jacobian, fresh.constraint_rhs)
+    monkeypatch.setenv("MECHSYS_CACHE", str(cache_dir))
+    mechsys.load(path).equations("kane")
+    model = mechsys.load(path)
+
+    def refuse(*_a, **_k):
+        raise AssertionError("derived although a stored derivation holds it")
+    monkeypatch.setattr(MechanicalModel, "partials", refuse)
+    monkeypatch.setattr(MechanicalModel, "dt", refuse)
+    assert (model.constraint_jacobian, model.constraint_rhs) == want
+    assert "kane" in model._eqs
+
+
 def test_a_change_of_structure_is_a_miss_and_a_change_of_value_a_hit(tmp_path, cache_dir, monkeypatch):
     text = (ROOT / "systems" / "double_pendulum.yaml").read_text()
     first = tmp_path / "a.yaml"

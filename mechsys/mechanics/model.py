@@ -272,18 +272,38 @@ class MechanicalModel:
         """Velocity-level constraint expressions, each linear in the rates (holonomic rows differentiated)."""
         return sp.Matrix([c.velocity for c in self.kin.constraints])
 
+    def _load_stored(self, skip: str | None = None) -> None:
+        """Once per model with constraints: a formulation's stored derivation (mechanics/derivations.py), which
+        fills A, b, T, V and Q as it loads: reading them costs less than deriving A and b (the bicycle's info and
+        a Lagrange derive after a Kane one: about 0.4 and 0.9 s). ``skip``: a formulation known not stored."""
+        if not self.kin.constraints or self.__dict__.get("_stored_tried"):
+            return
+        self.__dict__["_stored_tried"] = True
+        from mechsys.mechanics import derivations
+
+        for method in METHODS:
+            if method != skip and method not in self._eqs:
+                eq = derivations.load(self, method)
+                if eq is not None:
+                    self._eqs[method] = eq
+                    return
+
     @cached_property
     def constraint_jacobian(self) -> sp.Matrix:
         if not self.kin.constraints:
             return sp.zeros(0, len(self.q))
-        return self.partials(self.constraint_velocity)
+        self._load_stored()
+        stored = self.__dict__.get("constraint_jacobian")  # set by the loaded derivation
+        return stored if stored is not None else self.partials(self.constraint_velocity)
 
     @cached_property
     def constraint_rhs(self) -> sp.Matrix:
         """b in A q'' = b: minus the part of d/dt(A q' + a_t) without accelerations."""
         if not self.kin.constraints:
             return sp.zeros(0, 1)
-        return -self.dt(self.constraint_velocity)
+        self._load_stored()
+        stored = self.__dict__.get("constraint_rhs")
+        return stored if stored is not None else -self.dt(self.constraint_velocity)
 
     @cached_property
     def holonomic_constraints(self) -> sp.Matrix:
@@ -299,12 +319,7 @@ class MechanicalModel:
 
             eq = derivations.load(self, method)
             if eq is None:
-                if self.kin.constraints:  # A and b (and T, V, Q) from another formulation's stored entry, if any
-                    for other in METHODS:
-                        if other != method and other not in self._eqs:
-                            self._eqs[other] = derivations.load(self, other)
-                            if self._eqs[other] is None:
-                                del self._eqs[other]
+                self._load_stored(skip=method)
                 M, f = self._lagrange() if method == "lagrange" else self._kane()
                 eq = Equations(method, self.coordinates, self.q, self.u, self.a, M, f, self.generalized_forces,
                                self.kinetic_energy, self.potential_energy, self.constraint_jacobian,
