@@ -122,7 +122,7 @@ class ConstrainedPieces:
         if model.t in FreeSymbols().of_all(outputs):  # each shared node once (xreplace walks every path)
             outputs = [e.xreplace(t0) for e in outputs]
         args = [*model.q, *model.u, *model.a, *self.lam, *model.parameter_symbols]
-        return outputs, args, shared_program(outputs, args, [*model.q, *model.u])
+        return outputs, args, shared_program(outputs, args, [*model.q, *model.u], light=True)
 
     def _python_sources(self, outputs: list, args: list, program: ForwardProgram) -> dict:
         """Python sources of E alone (what a line search evaluates, its own CSE) and of E, M, A followed by
