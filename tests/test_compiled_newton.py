@@ -137,3 +137,21 @@ def test_the_library_built_beside_other_work_is_built_once(monkeypatch, tmp_path
     assert [t.name for t in __import__("threading").enumerate()].count("mechsys-newton-build") == 0
     assert len(list(tmp_path.glob("newton-*.so"))) == 1
     assert lib.mechsys_newton_work(3, 3, 0, 0, 0) > 0
+
+
+def test_a_process_forked_during_the_build_does_not_wait_for_it(monkeypatch, tmp_path):
+    """A sweep forks its workers: one forked while prepare_newton's thread holds the lock gets a lock of its own
+    (the thread does not exist in the child) and still gets the library."""
+    import os
+
+    monkeypatch.setenv("MECHSYS_CACHE", str(tmp_path))
+    monkeypatch.setattr(native, "_newton_lib", {})
+    with native._NEWTON_LOCK:  # as if the build thread were inside newton_library
+        pid = os.fork()
+        if pid == 0:  # the child: exit 0 when it got the library; killed by the alarm if it waits for the lock
+            import signal
+
+            signal.alarm(60)
+            os._exit(0 if native.newton_library() is not None else 1)
+    _, status = os.waitpid(pid, 0)
+    assert os.waitstatus_to_exitcode(status) == 0

@@ -500,6 +500,16 @@ _newton_lib: dict[str, Optional[ctypes.CDLL]] = {}
 _NEWTON_LOCK = threading.Lock()
 
 
+def _fresh_lock_after_fork() -> None:
+    """A process forked while prepare_newton's thread held the lock would wait for that thread forever (it does
+    not exist there): the child takes a lock of its own (and loads or builds the library itself)."""
+    global _NEWTON_LOCK
+    _NEWTON_LOCK = threading.Lock()
+
+
+os.register_at_fork(after_in_child=_fresh_lock_after_fork)
+
+
 def prepare_newton() -> None:
     """Start building newton.c's library in a thread, when it is not built yet: its compiler then runs beside the
     model's own (two processes; a first steady-motion command saves the second). newton_library waits for it."""
