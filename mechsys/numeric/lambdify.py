@@ -174,6 +174,21 @@ def shared_program(exprs: Sequence[sp.Expr], args: Sequence[sp.Symbol],
     return program
 
 
+def needed_values(program: ForwardProgram, rows: int | None) -> set[str]:
+    """Names of the subexpressions the first ``rows`` outputs depend on (those their Jacobian differentiates)."""
+    name_of = {sym: name for name, sym in program.symbols.items()}
+    value_of = dict(program.values)
+    needed: set[str] = set()
+    todo = [s for e in program.outputs[:rows] for s in sp.sympify(e).free_symbols if s in name_of]
+    while todo:
+        name = name_of[todo.pop()]
+        if name in needed:
+            continue
+        needed.add(name)
+        todo += [s for s in value_of[name].free_symbols if s in name_of and name_of[s] not in needed]
+    return needed
+
+
 def differentiate_program(program: ForwardProgram, wrt: Sequence[sp.Symbol], rows: int | None = None) -> ForwardProgram:
     """``program`` (shared_program's) with the symbolic derivatives of its values and the Jacobian of its first
     ``rows`` outputs with respect to ``wrt`` (a new program; ``program`` is left as it is)."""
@@ -185,14 +200,7 @@ def differentiate_program(program: ForwardProgram, wrt: Sequence[sp.Symbol], row
     values = {program.symbols[name]: value for name, value in program.values}
     order = [program.symbols[name] for name, _ in program.values]
     index = {sym: k for k, sym in enumerate(order)}
-    needed: set = set()
-    todo = [s for e in reduced[:rows] for s in e.free_symbols if s in index]
-    while todo:  # the subexpressions the differentiated outputs depend on
-        sym = todo.pop()
-        if sym in needed:
-            continue
-        needed.add(sym)
-        todo += [s for s in values[sym].free_symbols if s in index and s not in needed]
+    needed = {program.symbols[name] for name in needed_values(program, rows)}
 
     diff = Differentiator()  # sympy's diff, each subexpression once
 

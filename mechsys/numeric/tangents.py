@@ -14,7 +14,7 @@ from typing import Callable, Optional, Sequence
 
 import sympy as sp
 
-from mechsys.numeric.lambdify import ForwardProgram
+from mechsys.numeric.lambdify import ForwardProgram, needed_values
 from mechsys.numeric.native import _c_printer, c_power
 
 
@@ -155,7 +155,7 @@ def program_source(program: ForwardProgram, wrt: Sequence[sp.Symbol], rows: int,
         values = [f"    const double {name} = {writer.text(e)};" for name, e in program.values]
         outputs = [writer.text(sp.sympify(e)) for e in program.outputs]
         symbols = {name: sym for name, sym in program.symbols.items()}
-        needed = _needed(program, rows)
+        needed = needed_values(program, rows)
         for k, (name, e) in enumerate(program.values):
             if name not in needed:
                 continue
@@ -178,17 +178,3 @@ def program_source(program: ForwardProgram, wrt: Sequence[sp.Symbol], rows: int,
         parts += body + [f"    out[{i}] = {e};" for i, e in enumerate(results)] + ["}"]
     return "\n".join(parts) + "\n"
 
-
-def _needed(program: ForwardProgram, rows: int) -> set[str]:
-    """Names of the subexpressions the first ``rows`` outputs depend on."""
-    name_of = {sym: name for name, sym in program.symbols.items()}
-    value_of = dict(program.values)
-    needed: set[str] = set()
-    todo = [s for e in program.outputs[:rows] for s in sp.sympify(e).free_symbols if s in name_of]
-    while todo:
-        name = name_of[todo.pop()]
-        if name in needed:
-            continue
-        needed.add(name)
-        todo += [s for s in value_of[name].free_symbols if s in name_of and name_of[s] not in needed]
-    return needed
