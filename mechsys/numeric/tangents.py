@@ -154,7 +154,6 @@ def program_source(program: ForwardProgram, wrt: Sequence[sp.Symbol], rows: int,
     try:
         values = [f"    const double {name} = {writer.text(e)};" for name, e in program.values]
         outputs = [writer.text(sp.sympify(e)) for e in program.outputs]
-        symbols = {name: sym for name, sym in program.symbols.items()}
         needed = needed_values(program, rows)
         for k, (name, e) in enumerate(program.values):
             if name not in needed:
@@ -163,7 +162,7 @@ def program_source(program: ForwardProgram, wrt: Sequence[sp.Symbol], rows: int,
             for j, s in writer.tan(e).items():
                 writer.lines.append(f"    const double d{k}_{j} = {s};")
                 own[j] = f"d{k}_{j}"
-            writer.tangent[symbols[name]] = own
+            writer.tangent[program.symbols[name]] = own
         jacobian = []
         for e in program.outputs[:rows]:
             row = writer.tan(sp.sympify(e))
