@@ -41,10 +41,14 @@ class Differentiator:
         if kind is sp.Add:
             return sp.Add(*[self(a, x) for a in expr.args])
         if kind is sp.Mul:
-            # Mul._eval_derivative_n_times for n = 1: one term per factor differentiated (Leibniz)
+            # Mul._eval_derivative: one term per factor differentiated (Leibniz), none for a factor without x
             args = expr.args
-            return sp.Add(*[sp.Mul(*[self(a, x) if j == i else a for j, a in enumerate(args)])
-                            for i in range(len(args))])
+            terms = []
+            for i, a in enumerate(args):
+                d = self(a, x)
+                if d is not sp.S.Zero:
+                    terms.append(sp.Mul(*args[:i], d, *args[i + 1:]))
+            return sp.Add(*terms)
         if kind is sp.Pow:
             base, exp = expr.args
             dexp = self(exp, x)
