@@ -329,26 +329,18 @@ class MechanicalModel:
         return self._eqs[method]
 
     def _lagrange(self) -> tuple[sp.Matrix, sp.Matrix]:
-        """d/dt(dT/du) - dT/dq + dV/dq = Q. With T = u.M.u/2 + b.u + T0: M = d2T/du2, b = dT/du at u = 0, and
-        d/dt(dT/du) = M q'' + (dM/dt) u + db/dt, so f = Q - dV/dq + dT/dq - (dM/dt) u - db/dt."""
+        """d/dt(dT/du) - dT/dq + dV/dq = Q. With the momenta p = dT/du (linear in the rates): M = dp/du, and
+        d/dt(p) = M q'' + dp/dq u + dp/dt, so f = Q - dV/dq + dT/dq - (dp/dq u + dp/dt): one total derivative per
+        coordinate (the momentum's), not one per entry of M."""
         T, V, Q = self.kinetic_energy, self.potential_energy, self.generalized_forces
         n = len(self.q)
-        zero_rates = {u: 0 for u in self.u}
         M = sp.zeros(n, n)
-        f = sp.zeros(n, 1)
         diff = self.diff
         p = [diff(T, u) for u in self.u]
         for i in range(n):
             for j in range(i, n):
                 M[i, j] = M[j, i] = diff(p[i], self.u[j])
-        Mdot = sp.zeros(n, n)
-        for i in range(n):
-            for j in range(i, n):
-                Mdot[i, j] = Mdot[j, i] = self.dt(M[i, j])
-        for i in range(n):
-            b = p[i].xreplace(zero_rates)
-            f[i] = (Q[i] - diff(V, self.q[i]) + diff(T, self.q[i])
-                    - sum((Mdot[i, j] * self.u[j] for j in range(n)), sp.Integer(0)) - self.dt(b))
+        f = sp.Matrix([Q[i] - diff(V, self.q[i]) + diff(T, self.q[i]) - self.dt(p[i]) for i in range(n)])
         return M, f
 
     def _kane(self) -> tuple[sp.Matrix, sp.Matrix]:
