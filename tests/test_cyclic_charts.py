@@ -370,3 +370,23 @@ def test_the_physical_state_velocities_are_the_time_derivative_of_the_positions(
             checked += 1
         assert k == len(state)
     assert checked >= 3
+
+
+def test_review_computes_each_roots_physical_state_once(monkeypatch):
+    """charts.review compares every root with the kept ones (quadratic in the roots): each root's physical state
+    is computed once, not once per pair (the 10-link chain's 240 roots: 3.6 s of 24 s before)."""
+    import mechsys
+    from mechsys.analysis.equilibrium import charts
+    from mechsys.analysis.equilibrium import equilibria as eqm
+    from mechsys.numeric.parameters import parameter_values
+
+    model = mechsys.load(Path(__file__).resolve().parent.parent / "systems" / "double_pendulum.yaml")
+    problem = eqm.make_problem(model)
+    roots = [eqm.Equilibrium({"theta1": a, "theta2": b}, {}, []) for a in (0.0, math.pi) for b in (0.0, math.pi)]
+    roots += [eqm.Equilibrium({"theta1": 2 * math.pi, "theta2": 0.0}, {}, [])]  # the first again
+    calls = []
+    real = charts._physical
+    monkeypatch.setattr(charts, "_physical", lambda *a: calls.append(a) or real(*a))
+    kept, _note = charts.review(problem, roots, parameter_values(model))
+    assert len(kept) == 4
+    assert len(calls) == len(roots)

@@ -224,10 +224,11 @@ def review(problem: EquilibriumProblem, equilibria: list[Equilibrium], p: np.nda
     reason; candidates that are no steady motion in a regular chart (artefacts of the singular one) are dropped.
     Returns the equilibria kept and a note (empty when nothing happened)."""
     kept, dropped, undecided, seen, regular = [], 0, 0, set(), []
+    states: dict = {}  # each root's physical state computed once (the pairs are quadratic in the roots)
     for e in equilibria:
         found = singularities(problem.model, e.coordinates, p)
         if not found:
-            k = next((i for i in regular if same_motion(problem, kept[i], e, p)), None)
+            k = next((i for i in regular if same_motion(problem, kept[i], e, p, states)), None)
             if k is None:
                 regular.append(len(kept))
                 kept.append(e)
