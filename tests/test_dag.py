@@ -1,6 +1,6 @@
 """mechanics/dag.py: the free symbols of expression DAGs, each shared subexpression visited once, equal sympy's
 free_symbols on derived equations, on random expressions with bound variables and conditions, and on trees deeper
-than Python's recursion limit."""
+than Python's recursion limit; Substitution equals xreplace, rebuilding each shared subexpression once."""
 from __future__ import annotations
 
 import random
@@ -10,7 +10,7 @@ import sympy as sp
 
 import mechsys
 from helpers import SYSTEMS_DIR
-from mechsys.mechanics.dag import FreeSymbols
+from mechsys.mechanics.dag import FreeSymbols, Substitution
 
 
 @pytest.mark.parametrize("name", ["bicycle", "rolling_disk", "indicator", "four_bar"])
@@ -40,9 +40,43 @@ def test_random_expressions_with_bound_variables_and_conditions():
                            sp.Sum(u * x, (x, 1, 3))])
 
     symbols = FreeSymbols()
+    substitution = Substitution({y: sp.Rational(1, 2), a: 2}, symbols)  # keys that are never bound
     for _ in range(80):
         e = grow(rng.randrange(1, 5))
         assert symbols.of(e) == e.free_symbols, e
+        try:
+            expected = e.xreplace(substitution.mapping)
+        except (TypeError, ValueError) as exc:  # e.g. Max of arguments that cannot be compared: the same refusal
+            with pytest.raises(type(exc)):
+                substitution.of(e)
+            continue
+        assert substitution.of(e) == expected, e
+
+
+@pytest.mark.parametrize("name", ["indicator", "four_bar", "centrifuge"])
+def test_substitution_equals_xreplace_on_derived_equations(name):
+    model = mechsys.load(SYSTEMS_DIR / f"{name}.yaml")
+    eq = model.equations("kane")
+    for mapping in ({model.t: 0}, {u: 0 for u in model.u}, {model.q[0]: sp.Rational(1, 3), model.t: 2}):
+        substitution = Substitution(mapping)
+        for mat in (eq.M, eq.f, eq.A, eq.b):
+            assert substitution.matrix(mat) == mat.xreplace(mapping)
+
+
+def test_substitution_rebuilds_each_shared_subexpression_once():
+    """A DAG with 2**40 paths: xreplace would walk them all; Substitution rebuilds its 40 levels once each."""
+    t, x = sp.symbols("t x")
+    e = x + t
+    for _ in range(40):
+        e = sp.sin(e) * sp.cos(e) + e
+    substitution = Substitution({t: 0})
+    zero = substitution.of(e)
+    assert FreeSymbols().of(zero) == {x}  # (sympy's free_symbols would walk the paths too)
+    assert len(substitution._memo) < 10 * 40
+    small = x + t
+    for _ in range(6):
+        small = sp.sin(small) * sp.cos(small) + small
+    assert Substitution({t: 0}).of(small) == small.xreplace({t: 0})
 
 
 def test_a_tree_deeper_than_the_recursion_limit():

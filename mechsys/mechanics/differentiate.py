@@ -20,7 +20,8 @@ class Differentiator:
 
     def __init__(self) -> None:
         self._memo: dict[tuple[sp.Basic, sp.Symbol], sp.Expr] = {}
-        self.free = FreeSymbols().of  # expr.free_symbols, remembered per node (sympy recomputes it every call)
+        self.symbols = FreeSymbols()  # expr.free_symbols, remembered per node (sympy recomputes it every call)
+        self.free = self.symbols.of
 
     def __call__(self, expr: sp.Basic | sp.MatrixBase, x: sp.Symbol) -> sp.Basic:
         """What sympy.diff(expr, x) gives (elementwise for a matrix)."""
