@@ -10,7 +10,8 @@ import numpy as np
 import sympy as sp
 
 from mechsys.errors import AnalysisError, InputError
-from mechsys.mechanics.model import MechanicalModel
+from mechsys.mechanics.dag import Substitution
+from mechsys.mechanics.model import INTERNAL_METHOD, MechanicalModel
 from mechsys.numeric import cache
 from mechsys.numeric.lambdify import compile_exprs, generate_source
 from mechsys.numeric.runtime import function_from_source
@@ -91,7 +92,7 @@ class EquilibriumProblem:
         if not model.is_autonomous():
             raise AnalysisError("the equations depend explicitly on time (non-autonomous): there are no "
                                 "equilibria in the ordinary sense")
-        self.eq = model.equations("lagrange")
+        self.eq = model.equations(INTERNAL_METHOD)
         self.cyclic = [c for c in model.cyclic_coordinates() if not model.kin.constraints]
         self.free = [c for c in model.coordinates if c not in self.cyclic]
         self.nq = len(self.free)
@@ -122,9 +123,14 @@ class EquilibriumProblem:
         F = eq.f
         if self.m:
             F = F + eq.A.T * sp.Matrix(self.lam)
-        rows = list(F.xreplace(self.rest_substitution))
+        rows = list(Substitution(self.rest_substitution, self.model.diff.symbols).matrix(F))  # each shared node once
         rows += list(self.model.holonomic_constraints.xreplace({self.model.t: 0}))
         return sp.Matrix(rows)
+
+    @cached_property
+    def residual_count(self) -> int:
+        """len(residual_exprs) without forming them (the shapes of the cached code's outputs)."""
+        return len(self.model.q) + sum(1 for c in self.model.kin.constraints if c.kind == "holonomic")
 
     def _family_rates(self) -> dict[str, float]:
         """Cyclic rates whose equation vanishes identically at rest (e.g. a free rotor): fixed at the initial rate."""
@@ -246,18 +252,18 @@ class EquilibriumProblem:
     def J(self, z: np.ndarray, p: np.ndarray) -> np.ndarray:
         n = len(self.unknowns)
         if n == 0:  # nothing to solve for (every coordinate cyclic with its rate fixed): sympy refuses jacobian([])
-            return np.zeros((len(self.residual_exprs), 0))
-        return np.array(self._J(*z, *self.extra(), *p), dtype=float).reshape(len(self.residual_exprs), n)
+            return np.zeros((self.residual_count, 0))
+        return np.array(self._J(*z, *self.extra(), *p), dtype=float).reshape(self.residual_count, n)
 
     def Fp(self, z: np.ndarray, p: np.ndarray) -> np.ndarray:
         """dF/dp for every parameter (columns in model.parameter_symbols order)."""
-        return np.array(self._Fp(*z, *self.extra(), *p), dtype=float).reshape(len(self.residual_exprs), -1)
+        return np.array(self._Fp(*z, *self.extra(), *p), dtype=float).reshape(self.residual_count, -1)
 
     def Fr(self, z: np.ndarray, p: np.ndarray) -> np.ndarray:
         """dF/d(given rates) (columns in fixed_rates order): a family's rate as a continuation parameter."""
         if not self.fixed_rates:
-            return np.zeros((len(self.residual_exprs), 0))
-        return np.array(self._Fr(*z, *self.extra(), *p), dtype=float).reshape(len(self.residual_exprs), -1)
+            return np.zeros((self.residual_count, 0))
+        return np.array(self._Fr(*z, *self.extra(), *p), dtype=float).reshape(self.residual_count, -1)
 
     #: "compiled" when _newton runs numeric/newton.c for this problem (see compiled_newton), else "python"
     newton_path = "python"

@@ -31,7 +31,7 @@ import sympy as sp
 from mechsys.analysis.equilibrium.equilibria import Equilibrium, EquilibriumProblem, wrap
 from mechsys.numeric.parameters import parameter_values
 from mechsys.errors import AnalysisError, InputError
-from mechsys.mechanics.dag import FreeSymbols
+from mechsys.mechanics.dag import FreeSymbols, Substitution
 from mechsys.mechanics.model import MechanicalModel
 from mechsys.numeric import native, tangents
 from mechsys.numeric.lambdify import (ForwardProgram, compile_exprs, differentiate_program, function_from_source,
@@ -119,8 +119,8 @@ class ConstrainedPieces:
         g = [r.velocity for r in rows]
         Phi = [r.position for r in rows if r.kind == "holonomic"]
         outputs = [sp.sympify(e) for e in list(R) + list(S) + g + Phi + list(eq.M) + list(eq.A)]
-        if model.t in FreeSymbols().of_all(outputs):  # each shared node once (xreplace walks every path)
-            outputs = [e.xreplace(t0) for e in outputs]
+        at_t0 = Substitution(t0, model.diff.symbols)  # each shared node once (xreplace walks every path)
+        outputs = [at_t0.of(e) for e in outputs]
         args = [*model.q, *model.u, *model.a, *self.lam, *model.parameter_symbols]
         return outputs, args, shared_program(outputs, args, [*model.q, *model.u], light=True)
 
