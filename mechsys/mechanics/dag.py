@@ -52,7 +52,7 @@ class FreeSymbols:
 
 class Substitution:
     """``of(expr)``: ``expr.xreplace(mapping)`` for a mapping of symbols, each subexpression object rebuilt once
-    (sympy's xreplace walks every path of a DAG: the 20-link chain's linearization blocks, 22 s for a t = 0 that
+    (sympy's xreplace walks every path of a DAG: 6 s of the 20-link chain's linearization blocks, for a t = 0 that
     does not occur). Nodes without a replaced symbol are returned as they are; the others are rebuilt with
     ``func(*args)`` as xreplace does, so the result equals xreplace's."""
 
