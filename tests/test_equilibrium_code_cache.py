@@ -100,8 +100,8 @@ def test_a_stored_rest_equation_that_is_not_generated_code_is_ignored(stored, ca
     assert isinstance(cache.load(eqm._source_key(again, "F"))["source"], str)  # generated and stored again
 
 
-# A model no textbook case was tuned on, written as a user would from docs/yaml-reference.md: a three-link chain of rods
-# (relative angles) with a spring-loaded slider on the last link, gravity along -y.
+# A model no textbook case was tuned on, written as a user would from docs/yaml-reference.md: a three-link chain of
+# rods (relative angles) with a spring-loaded slider on the last link, gravity along -y.
 _USER_CHAIN = """
 name: user_chain
 parameters: {m: 0.7, l: 0.9, g: 9.81, k: 40.0, ms: 0.3}
