@@ -10,6 +10,7 @@ from mechsys.mechanics.build import Body, Builder, Kinematics
 from mechsys.mechanics.dag import FreeSymbols
 from mechsys.mechanics.differentiate import Differentiator
 from mechsys.mechanics.kinematics import FrameState, rate_coefficients, time_derivative
+from mechsys.mechanics.products import gram, product
 from mechsys.model.load import T as TIME
 from mechsys.model.load import Document
 
@@ -259,7 +260,7 @@ class MechanicalModel:
             if load.kind == "gravity":
                 for (b, _r, _v, _w, frame), (Jv, _Jw) in zip(self._body_kinematics, self._body_partials):
                     if b.mass != 0 and n:
-                        Qc.add(Jv.T * (b.mass * frame.to_home(load.data["g"])))
+                        Qc.add(product(Jv.T, b.mass * frame.to_home(load.data["g"])))
             else:
                 V = self._elastic_potential(load.kind, load.data)
                 if V != 0:
@@ -351,12 +352,12 @@ class MechanicalModel:
         for (b, _r, v, w, frame), (Jv, Jw) in zip(self._body_kinematics, self._body_partials):
             a0 = frame.point_acceleration(b.com_local)  # acceleration of G with q'' = 0, home axes
             if b.mass != 0:
-                M.add(b.mass * Jv.T * Jv)
-                f.add(-(b.mass * Jv.T * a0))
+                M.add(gram(Jv, b.mass))
+                f.add(-product(b.mass * Jv.T, a0))
             if not b.particle and b.inertia != sp.zeros(3, 3):
                 I = b.inertia
-                M.add(Jw.T * I * Jw)
-                f.add(-(Jw.T * (I * frame.alpha + w.cross(I * w))))  # Euler's equations in body axes
+                M.add(product(product(Jw.T, I), Jw))
+                f.add(-product(Jw.T, I * frame.alpha + w.cross(I * w)))  # Euler's equations in body axes
         return M.matrix(), f.matrix()
 
     @cached_property

@@ -1,0 +1,89 @@
+"""The entry-by-entry matrix products (mechanics/products.py) and the one-walk rate coefficients
+(kinematics.rate_coefficients) against sympy's own product, differentiation and substitution."""
+from __future__ import annotations
+
+import random
+
+import pytest
+import sympy as sp
+
+from mechsys.mechanics.kinematics import rate_coefficients
+from mechsys.mechanics.products import gram, product
+
+q1, q2, q3, a, b, c, m = sp.symbols("q1 q2 q3 a b c m")
+u1, u2, u3 = sp.symbols("u1 u2 u3")
+
+
+def _random_entry(rng: random.Random) -> sp.Expr:
+    """Zero, a number, a symbol, a trigonometric product or a sum of them (as a chain's partial velocities)."""
+    atoms = [sp.Integer(0), sp.Integer(0), sp.Rational(1, 2), sp.Integer(-3), a, b, -c, sp.sin(q1), sp.cos(q1 + q2)]
+    kind = rng.randrange(4)
+    if kind == 0:
+        return rng.choice(atoms)
+    if kind == 1:
+        return rng.choice(atoms) * rng.choice(atoms)
+    return sp.Add(*(rng.choice(atoms) * rng.choice(atoms[4:]) for _ in range(rng.randrange(2, 5))))
+
+
+def _random_matrix(rng: random.Random, rows: int, cols: int) -> sp.Matrix:
+    return sp.Matrix(rows, cols, [_random_entry(rng) for _ in range(rows * cols)])
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_product_builds_sympys_entries(seed):
+    rng = random.Random(seed)
+    A, B = _random_matrix(rng, 3, 4), _random_matrix(rng, 4, 2)
+    got = product(A, B)
+    assert got.shape == (3, 2)
+    assert list(got) == list(A * B)  # the same expressions, not only the same values
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_gram_is_symmetric_and_equals_sympys(seed):
+    rng = random.Random(seed)
+    J = _random_matrix(rng, 3, 5)
+    for scale in (sp.Integer(1), m, 2 * m):
+        got = gram(J, scale)
+        assert got == got.T
+        reference = (scale * J).T * J
+        # the upper triangle is sympy's own entry; the lower one mirrors it (the same value)
+        for i in range(5):
+            for j in range(i, 5):
+                assert got[i, j] == reference[i, j]
+                assert sp.expand(got[j, i] - reference[j, i]) == 0
+    # a numeric scale can distribute over a sum (sympy's 2*(x + y) -> 2*x + 2*y): same values
+    got = gram(J, sp.Integer(2))
+    assert sp.expand(got - (2 * J).T * J) == sp.zeros(5, 5)
+
+
+def test_product_rejects_mismatched_shapes():
+    with pytest.raises(ValueError, match="cannot multiply"):
+        product(sp.zeros(2, 3), sp.zeros(2, 3))
+
+
+def test_rate_coefficients_equal_the_jacobian():
+    """A velocity linear in the rates, with a rheonomic part inside a product: the walk's coefficients are the
+    Jacobian (by differentiation), and the nested time term does not leave a k*(c + a) - k*c behind."""
+    v = sp.Matrix([
+        -a * sp.sin(q1) * u1 - b * (u1 + u2) * sp.sin(q1 + q2),
+        m * (c * sp.cos(q3) + a * u3) + u2 / 2,
+        sp.Integer(0),
+        (a * u1 + b * (c + u2)) * (sp.sin(q1) + 2) - c,
+    ])
+    rates = [u1, u2, u3]
+    got = rate_coefficients(v, rates)
+    assert got.shape == (4, 3)
+    assert sp.expand(got - v.jacobian(rates)) == sp.zeros(4, 3)
+    assert got[1, 2] == m * a
+    assert got[3, 1] == b * (sp.sin(q1) + 2)
+    assert got[2, :] == sp.zeros(1, 3)
+
+
+def test_rate_coefficients_of_a_nonlinear_entry_keep_the_secant():
+    """An entry that is not linear in the rates (a caller's mistake, not a velocity): the substitution's secant,
+    entry(u_j = 1, others 0) - entry(0), as before the one-walk reading; the linear entries are read as usual."""
+    v = sp.Matrix([u1 * u2 + a * u1, sp.sin(u1) + b * u2, a * u3])
+    got = rate_coefficients(v, [u1, u2, u3])
+    assert list(got[0, :]) == [a, 0, 0]
+    assert list(got[1, :]) == [sp.sin(1), b, 0]
+    assert list(got[2, :]) == [0, 0, a]
