@@ -16,7 +16,7 @@ from mechsys.mechanics.dag import FreeSymbols
 from mechsys.mechanics.differentiate import Differentiator
 from mechsys.numeric.runtime import StateFunction, function_from_source, matrix_from_source
 
-__all__ = ["generate_source", "compile_exprs", "matrix_source", "compile_matrix", "function_from_source",
+__all__ = ["generate_source", "shared_cse", "compile_exprs", "matrix_source", "compile_matrix", "function_from_source",
            "matrix_from_source", "StateFunction", "value_and_jacobian_sources", "value_and_jacobian_program",
            "ForwardProgram", "shared_program", "differentiate_program"]
 
@@ -85,23 +85,38 @@ class _Printer(PythonCodePrinter):
         return "0.0"
 
 
-#: The latest generated sources by (expressions, arguments): one command may compile the same matrix twice (the
-#: cyclic test's shifted M and A, then `info`'s), and CSE is the costly part. The source is a function of the key.
-_RECENT: OrderedDict[tuple, str] = OrderedDict()
+#: The latest CSE results by (expressions, light): one command may compile the same expressions twice (the
+#: cyclic test's shifted M and A, then `info`'s; a first `simulate` prints the staged equations and the constraint
+#: rows as Python and as C), and CSE is the costly part. The result is a function of the key.
+_RECENT: OrderedDict[tuple, tuple[list, list]] = OrderedDict()
 _RECENT_SIZE = 16
+
+
+def shared_cse(exprs: Sequence[sp.Expr], light: bool = False) -> tuple[list, list]:
+    """sympy's cse of ``exprs`` (``light``: light_cse's), (replacements, reduced), memoized on the expressions:
+    the Python and the C code generators print the same result."""
+    exprs = [sp.sympify(e) for e in exprs]
+    key = (tuple(exprs), light)
+    out = _RECENT.get(key)
+    if out is None:
+        out = _RECENT[key] = light_cse(exprs) if light else sp.cse(exprs, order="none")
+        if len(_RECENT) > _RECENT_SIZE:
+            _RECENT.popitem(last=False)
+    return out
 
 
 def generate_source(exprs: Sequence[sp.Expr], args: Sequence[sp.Symbol], light: bool = False) -> str:
     """Python source of ``_f(a0, a1, ...)`` returning ``exprs`` (shared subexpressions computed once). ``light``:
     for code evaluated a few times only (light_cse)."""
-    exprs = [sp.sympify(e) for e in exprs]
-    key = (tuple(exprs), tuple(args), light)
-    source = _RECENT.get(key)
-    if source is None:
-        source = _RECENT[key] = _generate_source(exprs, args, light)
-        if len(_RECENT) > _RECENT_SIZE:
-            _RECENT.popitem(last=False)
-    return source
+    names = {a: f"a{i}" for i, a in enumerate(args)}
+    replacements, reduced = shared_cse(exprs, light)
+    for k, (sym, _) in enumerate(replacements):
+        names[sym] = f"x{k}"
+    printer = _Printer(names)
+    lines = [f"def _f({', '.join(names[a] for a in args)}):"]
+    lines += [f"    {names[sym]} = {printer.doprint(value)}" for sym, value in replacements]
+    lines.append("    return [" + ", ".join(printer.doprint(e) for e in reduced) + "]")
+    return "\n".join(lines)
 
 
 def light_cse(exprs: list[sp.Expr], symbols=None) -> tuple[list, list]:
@@ -115,18 +130,6 @@ def light_cse(exprs: list[sp.Expr], symbols=None) -> tuple[list, list]:
         return sp.cse(exprs, symbols=symbols, order="none")
     # (tree_cse skips the names the inputs use)
     return tree_cse(exprs, symbols if symbols is not None else sp.numbered_symbols("x"), None, "none")
-
-
-def _generate_source(exprs: list[sp.Expr], args: Sequence[sp.Symbol], light: bool = False) -> str:
-    names = {a: f"a{i}" for i, a in enumerate(args)}
-    replacements, reduced = light_cse(exprs) if light else sp.cse(exprs, order="none")
-    for k, (sym, _) in enumerate(replacements):
-        names[sym] = f"x{k}"
-    printer = _Printer(names)
-    lines = [f"def _f({', '.join(names[a] for a in args)}):"]
-    lines += [f"    {names[sym]} = {printer.doprint(value)}" for sym, value in replacements]
-    lines.append("    return [" + ", ".join(printer.doprint(e) for e in reduced) + "]")
-    return "\n".join(lines)
 
 
 @dataclass

@@ -144,20 +144,25 @@ def c_power(base: str, x) -> Optional[str]:
     return None
 
 
-def pieces_source(exprs: Sequence, t, q: Sequence, u: Sequence, params: Sequence, name: str = "pieces") -> str:
-    """C function ``name(t, q, u, p, out)`` writing ``exprs`` into ``out`` (shared subexpressions once)."""
-    import sympy as sp
+def pieces_source(blocks: Sequence[Sequence], t, q: Sequence, u: Sequence, params: Sequence,
+                  name: str = "pieces") -> str:
+    """C function ``name(t, q, u, p, out)`` writing the expressions of ``blocks`` one after the other into ``out``.
+    Each block's shared subexpressions are computed once, from the same CSE as the block's Python code
+    (lambdify.shared_cse: a first `simulate` does not eliminate them twice)."""
+    from mechsys.numeric.lambdify import shared_cse
 
-    names = {t: "t", **{s: f"q[{i}]" for i, s in enumerate(q)}, **{s: f"u[{i}]" for i, s in enumerate(u)},
-             **{s: f"p[{i}]" for i, s in enumerate(params)}}
-    replacements, reduced = sp.cse([sp.sympify(e) for e in exprs], order="none")
-    for k, (sym, _) in enumerate(replacements):
-        names[sym] = f"x{k}"
-    printer = _c_printer(names)
+    args = {t: "t", **{s: f"q[{i}]" for i, s in enumerate(q)}, **{s: f"u[{i}]" for i, s in enumerate(u)},
+            **{s: f"p[{i}]" for i, s in enumerate(params)}}
     lines = [f"static void {name}(double t, const double *q, const double *u, const double *p, double *out) {{",
              "    (void)t; (void)q; (void)u; (void)p;"]
-    lines += [f"    const double {names[sym]} = {printer.doprint(value)};" for sym, value in replacements]
-    lines += [f"    out[{i}] = {printer.doprint(e)};" for i, e in enumerate(reduced)]
+    start = 0
+    for b, exprs in enumerate(blocks):
+        replacements, reduced = shared_cse(exprs)
+        names = {**args, **{sym: f"x{b}_{k}" for k, (sym, _) in enumerate(replacements)}}
+        printer = _c_printer(names)
+        lines += [f"    const double {names[sym]} = {printer.doprint(value)};" for sym, value in replacements]
+        lines += [f"    out[{start + i}] = {printer.doprint(e)};" for i, e in enumerate(reduced)]
+        start += len(reduced)
     lines.append("}")
     return "\n".join(lines)
 
@@ -196,7 +201,7 @@ def model_source(model) -> str:
     pieces, layout = model_pieces(model)
     n = len(model.q)
     m = len(model.kin.constraints)
-    rows = [*model.constraint_jacobian, *model.constraint_rhs] if m else [0]  # A (m x n, row-major), then b
+    rows = [list(model.constraint_jacobian), list(model.constraint_rhs)] if m else [[0]]  # A (m x n, row-major), b
     head = ["#include <math.h>", "#include <string.h>", "#ifndef M_PI", "#define M_PI 3.14159265358979323846",
             "#endif", f"#define N {n}", f"#define NPAR {len(model.parameter_symbols)}", f"#define NOUT {max(len(pieces), 1)}", f"#define NB {max(len(layout), 1)}",
             "static const int LAYOUT[2 * NB] = {" + (", ".join(str(int(x)) for b in layout for x in b) or "0, 0")
@@ -204,7 +209,7 @@ def model_source(model) -> str:
             _table("A", co.A), _table("B", co.B), _table("C", co.C), _table("E3", co.E3), _table("E5", co.E5),
             _table("D", co.D),
             f"#define NCON {m}",
-            pieces_source(pieces, model.t, model.q, model.u, model.parameter_symbols),
+            pieces_source([pieces], model.t, model.q, model.u, model.parameter_symbols),
             pieces_source(rows, model.t, model.q, model.u, model.parameter_symbols, "constraint_rows")]
     return "\n".join(head) + "\n" + TEMPLATE.read_text(encoding="utf-8")
 
