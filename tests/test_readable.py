@@ -364,3 +364,21 @@ def test_a_stored_clean_up_that_does_not_fit_is_ignored_and_the_budget_is_in_the
     assert damaged == 2  # the default budget's entry and budget 10's
     again = rd.stored_readable(load_system("gyrostabilizer"), eq)
     assert entries(again.equations) == entries(first.equations) and again.entries == first.entries
+
+
+def test_sum_factors_shared_by_many_products_are_tidied_once(monkeypatch):
+    """A chain's mass-matrix entries are products of the same few sums: each sum factor's numbers and signs are
+    worked out once per clean-up (tidy_signs's memo), and the result is the one without the memo."""
+    from mechsys.report import readable as rd
+
+    x = sp.symbols("x0:6")
+    sums = [-2 * sp.sin(x[k]) - 2 * sp.cos(x[k + 1]) - x[k + 2] for k in range(4)]
+    entries = [sp.Symbol("m") * a * b for a in sums for b in sums]
+    expected = [rd.tidy_signs(e) for e in entries]
+    calls = []
+    real = rd._tidy_factor
+    monkeypatch.setattr(rd, "_tidy_factor", lambda f: calls.append(f) or real(f))
+    cleaner = rd._Cleaner(rd._Work(10**6), norms=False)
+    got = [cleaner.clean(e) for e in entries]
+    assert calls and len(calls) == len(set(calls))  # no factor tidied twice
+    assert got == expected

@@ -6,6 +6,8 @@ from typing import Any, Callable, Sequence
 
 import sympy as sp
 
+from mechsys.mechanics.products import product
+
 AXES = {
     "x": (1, 0, 0), "y": (0, 1, 0), "z": (0, 0, 1),
     "-x": (-1, 0, 0), "-y": (0, -1, 0), "-z": (0, 0, -1),
@@ -76,11 +78,11 @@ class FrameState:
         ``rate`` is the angle's rate and ``accel0`` the q''-free part of its second derivative."""
         key = tuple(axis)
         R_rel = rotation(axis, angle)
-        carried = R_rel.T * self.omega
+        carried = product(R_rel.T, self.omega)
         omega = carried + axis * rate  # the axis is invariant under its own rotation
-        alpha = R_rel.T * self.alpha + axis * accel0 + carried.cross(axis * rate)
+        alpha = product(R_rel.T, self.alpha) + axis * accel0 + carried.cross(axis * rate)
         if self.pure:
-            v_own, a_own = R_rel.T * self.v_own, R_rel.T * self.a_own
+            v_own, a_own = product(R_rel.T, self.v_own), product(R_rel.T, self.a_own)
             merged = None
             if self.pure_axis is None:
                 merged = (R_rel, key, angle)
@@ -92,34 +94,34 @@ class FrameState:
             if merged is not None:
                 R, pure_axis, total = merged
                 return FrameState(R, self.origin, omega, alpha, self.v, self.a, True, pure_axis, total, v_own, a_own)
-            return FrameState(self.R * R_rel, self.origin, omega, alpha, v_own, a_own, False)
-        return FrameState(self.R * R_rel, self.origin, omega, alpha, R_rel.T * self.v, R_rel.T * self.a, False)
+            return FrameState(product(self.R, R_rel), self.origin, omega, alpha, v_own, a_own, False)
+        return FrameState(product(self.R, R_rel), self.origin, omega, alpha, product(R_rel.T, self.v), product(R_rel.T, self.a), False)
 
     def translated(self, offset: sp.Matrix, rate: sp.Matrix, accel0: sp.Matrix) -> "FrameState":
         """This frame moved by ``offset`` given in its own axes (``rate``, ``accel0``: its derivatives)."""
         v_own = a_own = None
         if self.pure:
-            w, al = self.R * self.omega, self.R * self.alpha
-            d, dd, ddd = self.R * offset, self.R * rate, self.R * accel0
+            w, al = product(self.R, self.omega), product(self.R, self.alpha)
+            d, dd, ddd = product(self.R, offset), product(self.R, rate), product(self.R, accel0)
             v = self.v + w.cross(d) + dd
             a = self.a + al.cross(d) + w.cross(w.cross(d)) + 2 * w.cross(dd) + ddd
             v_own, a_own = _moved(self.v_own, self.a_own, self.omega, self.alpha, offset, rate, accel0)
         else:
             v, a = _moved(self.v, self.a, self.omega, self.alpha, offset, rate, accel0)
-        return FrameState(self.R, self.origin + self.R * offset, self.omega, self.alpha, v, a, self.pure,
+        return FrameState(self.R, self.origin + product(self.R, offset), self.omega, self.alpha, v, a, self.pure,
                           self.pure_axis, self.pure_angle, v_own, a_own)
 
     def point(self, local: sp.Matrix) -> sp.Matrix:
         """Ground position of a point fixed in this frame."""
-        return self.origin + self.R * local
+        return self.origin + product(self.R, local)
 
     @property
     def omega_ground(self) -> sp.Matrix:
-        return self.R * self.omega
+        return product(self.R, self.omega)
 
     @property
     def omega_home(self) -> sp.Matrix:
-        return self.R * self.omega if self.pure else self.omega
+        return product(self.R, self.omega) if self.pure else self.omega
 
     @property
     def home_R(self) -> sp.Matrix:
@@ -127,17 +129,17 @@ class FrameState:
         return sp.eye(3) if self.pure else self.R
 
     def to_home(self, ground_vec: sp.Matrix) -> sp.Matrix:
-        return ground_vec if self.pure else self.R.T * ground_vec
+        return ground_vec if self.pure else product(self.R.T, ground_vec)
 
     def point_velocity(self, local: sp.Matrix) -> sp.Matrix:
         """Velocity (home components) of a point fixed in this frame."""
-        arm = self.R * local if self.pure else local
+        arm = product(self.R, local) if self.pure else local
         return self.v + self.omega_home.cross(arm)
 
     def point_acceleration(self, local: sp.Matrix) -> sp.Matrix:
         """The q''-free part of the acceleration (home components) of a point fixed in this frame."""
         if self.pure:
-            w, al, arm = self.R * self.omega, self.R * self.alpha, self.R * local
+            w, al, arm = product(self.R, self.omega), product(self.R, self.alpha), product(self.R, local)
         else:
             w, al, arm = self.omega, self.alpha, local
         return self.a + al.cross(arm) + w.cross(w.cross(arm))

@@ -198,13 +198,19 @@ def _divided(base: sp.Expr, split: list[tuple[sp.Expr, sp.Expr]], number: sp.Exp
     return base._new_rawargs(*([first] if first is not None else []), *terms)
 
 
-def tidy_signs(expr: sp.Expr) -> sp.Expr:
-    """A product or power with the numbers and minus signs of its sum factors moved to its coefficient."""
+def tidy_signs(expr: sp.Expr, memo: dict | None = None) -> sp.Expr:
+    """A product or power with the numbers and minus signs of its sum factors moved to its coefficient. ``memo``:
+    the factors' results so far (a chain's mass-matrix entries share their sum factors)."""
     coeff = sp.Integer(1)
     factors = []
     changed = False
     for f in sp.Mul.make_args(expr):
-        tidy = _tidy_factor(f)
+        if memo is None:
+            tidy = _tidy_factor(f)
+        elif f in memo:
+            tidy = memo[f]
+        else:
+            tidy = memo[f] = _tidy_factor(f)
         if tidy is None:
             factors.append(f)
             continue
@@ -295,6 +301,7 @@ class _Cleaner:
         self.memo: dict[sp.Basic, sp.Basic] = {}
         self.sizes: dict[sp.Basic, int] = {}
         self.products: dict[sp.Expr, sp.Expr] = {}
+        self.factors: dict[sp.Expr, tuple | None] = {}  # tidy_signs's memo
 
     def tick(self) -> None:
         self.work.spent += 1
@@ -317,7 +324,7 @@ class _Cleaner:
             new = pythagoras(new) if redo else new
             new = self._norms(new) if self.norms else new
         elif (new.is_Mul or new.is_Pow) and redo:
-            new = tidy_signs(new)
+            new = tidy_signs(new, self.factors)
         return node if new in _UNDEFINED and node not in _UNDEFINED else new
 
     def _expandable(self, factor: sp.Expr) -> int:
