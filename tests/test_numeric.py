@@ -51,23 +51,27 @@ def test_forward_jacobian_of_abs_and_of_an_input_named_like_a_temporary():
         assert out[2:] == pytest.approx(want, rel=1e-12, abs=1e-12)
 
 
-def test_a_remembered_source_is_the_source_generated_afresh_for_the_same_expressions_and_arguments():
-    """generate_source remembers its latest results (one command compiles M for the cyclic test and for info):
-    the key is the expressions and the arguments in order, and a hit is what generation gives."""
+def test_a_remembered_cse_is_the_cse_computed_afresh_for_the_same_expressions():
+    """shared_cse remembers its latest results (one command compiles M for the cyclic test and for info; a first
+    simulate prints the same expressions as Python and as C): the key is the expressions in order and the kind of
+    CSE, a hit is what sympy's cse gives, and the sources printed from it depend on the arguments' order."""
     import sympy as sp
 
     from mechsys.numeric import lambdify as L
 
     x, y, a = sp.symbols("x y a")
     exprs = [sp.sin(x) * a + y**2, sp.cos(x - y) * sp.sin(x) * a]
-    first = L.generate_source(exprs, [x, y, a])
-    assert L.generate_source(list(exprs), [x, y, a]) == first == L._generate_source(exprs, [x, y, a])
+    first = L.shared_cse(exprs)
+    assert L.shared_cse(list(exprs)) is first and first == sp.cse(exprs, order="none")
+    assert L.shared_cse(exprs, light=True) == L.light_cse(exprs)
+    assert L.shared_cse(exprs[::-1]) == sp.cse(exprs[::-1], order="none")
+    source = L.generate_source(exprs, [x, y, a])
     swapped = L.generate_source(exprs, [y, x, a])
-    assert swapped != first and swapped == L._generate_source(exprs, [y, x, a])
-    assert L.function_from_source(swapped)(2.0, 1.0, 3.0) == L.function_from_source(first)(1.0, 2.0, 3.0)
+    assert swapped != source
+    assert L.function_from_source(swapped)(2.0, 1.0, 3.0) == L.function_from_source(source)(1.0, 2.0, 3.0)
     for k in range(L._RECENT_SIZE + 1):  # bounded: the oldest is forgotten
-        L.generate_source([x + k], [x])
-    assert len(L._RECENT) == L._RECENT_SIZE and (tuple(exprs), (x, y, a)) not in L._RECENT
+        L.shared_cse([x + k])
+    assert len(L._RECENT) == L._RECENT_SIZE and (tuple(exprs), False) not in L._RECENT
 
 
 def test_the_direct_python_printer_computes_what_sympys_printer_computes():
