@@ -390,3 +390,45 @@ def test_review_computes_each_roots_physical_state_once(monkeypatch):
     kept, _note = charts.review(problem, roots, parameter_values(model))
     assert len(kept) == 4
     assert len(calls) == len(roots)
+
+
+@pytest.mark.parametrize("name", ["top_zxz.yaml", "top_cardan.yaml"])
+def test_review_compares_with_all_kept_motions_at_once_as_pair_by_pair(name):
+    """charts._Motions answers, for each new root, the first kept motion that same_motion (pair by pair) calls
+    the same: on tops with cyclic angles, with roots repeated a full turn away, a half turn of each cyclic angle
+    away, with a changed rate, and unrelated."""
+    import mechsys
+    from mechsys.analysis.equilibrium import charts
+    from mechsys.analysis.equilibrium import equilibria as eqm
+    from mechsys.numeric.parameters import parameter_values
+
+    model = mechsys.load(Path(__file__).resolve().parent / "data" / "beyond" / name)
+    problem = eqm.make_problem(model)
+    p = parameter_values(model)
+    rng = np.random.default_rng(7)
+    turning = [c for c in problem.cyclic if problem.angles.get(c, False)]
+    assert turning, "the test needs a cyclic angle"
+    base = []
+    for _ in range(4):
+        coords = {c: float(rng.uniform(0.2, 1.2)) for c in model.coordinates}
+        rates = {c: float(rng.uniform(-2, 2)) for c in turning}  # steady spins
+        base.append(eqm.Equilibrium(coords, rates, []))
+    roots = list(base)
+    for e in base:
+        roots.append(eqm.Equilibrium({c: v + 2 * math.pi for c, v in e.coordinates.items()}, dict(e.rates), []))
+        roots.append(eqm.Equilibrium({c: v + (math.pi if c in turning else 0.0) for c, v in e.coordinates.items()},
+                                     dict(e.rates), []))
+        first = turning[0]
+        roots.append(eqm.Equilibrium(dict(e.coordinates), {**e.rates, first: e.rates[first] + 1e-3}, []))
+    order = rng.permutation(len(roots))
+    roots = [roots[k] for k in order]
+    motions, kept, hits = charts._Motions(problem, p, {}), [], 0
+    for e in roots:
+        expected = next((j for j, a in enumerate(kept) if charts.same_motion(problem, a, e, p)), None)
+        assert motions.first_same(e) == expected
+        if expected is None:
+            kept.append(e)
+            motions.keep(e)
+        else:
+            hits += 1
+    assert hits >= 4 and len(kept) >= 8  # full turns are the same motion; a changed spin rate is not

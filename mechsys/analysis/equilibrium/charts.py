@@ -178,6 +178,32 @@ def _physical(problem: EquilibriumProblem, e: Equilibrium, p: np.ndarray, shift:
     return np.array(_state_fn(model)(*q, *u, *p, 0.0), dtype=float)
 
 
+def _state(problem: EquilibriumProblem, e: Equilibrium, p: np.ndarray, shift: dict[str, float],
+           memo: dict | None) -> np.ndarray:
+    """_physical, remembered in ``memo`` by every number it reads (None: not remembered)."""
+    if memo is None:
+        return _physical(problem, e, p, shift)
+    key = (tuple(e.coordinates.items()), tuple(e.rates.items()), np.asarray(p, dtype=float).tobytes(),
+           tuple(shift.items()))
+    if key not in memo:
+        memo[key] = _physical(problem, e, p, shift)
+    return memo[key]
+
+
+def _reference(problem: EquilibriumProblem, a: Equilibrium, p: np.ndarray, memo: dict | None
+               ) -> tuple[np.ndarray, float]:
+    """The physical state of ``a`` and the tolerance the other motion's state is compared with."""
+    ref = _state(problem, a, p, {}, memo)
+    return ref, (1e-7 * (1.0 + float(np.max(np.abs(ref)))) if ref.size else 1e-7)
+
+
+def _shifted_states(problem: EquilibriumProblem, b: Equilibrium, p: np.ndarray, memo: dict | None):
+    """The physical states of ``b`` with each cyclic angle turned by nothing or a half turn (lazily)."""
+    turning = [c for c in problem.cyclic if problem.angles.get(c, False)][:3]
+    for halves in itertools.product((0.0, math.pi), repeat=len(turning)):
+        yield _state(problem, b, p, dict(zip(turning, halves)), memo)
+
+
 def same_motion(problem: EquilibriumProblem, a: Equilibrium, b: Equilibrium, p: np.ndarray,
                 memo: dict | None = None) -> bool:
     """``a`` and ``b`` are one steady motion: the same physical state of every massive link, up to a half turn of
@@ -186,23 +212,51 @@ def same_motion(problem: EquilibriumProblem, a: Equilibrium, b: Equilibrium, p: 
     ``memo``: the physical states already computed, by every number they read (a sweep compares many pairs)."""
     if any(abs(a.rates.get(c, 0.0) - b.rates.get(c, 0.0)) > 1e-7 * (1 + abs(a.rates.get(c, 0.0))) for c in a.rates):
         return False
+    ref, tol = _reference(problem, a, p, memo)
+    return any(np.max(np.abs(state - ref), initial=0.0) <= tol for state in _shifted_states(problem, b, p, memo))
 
-    def physical(e: Equilibrium, shift: dict[str, float]) -> np.ndarray:
-        if memo is None:
-            return _physical(problem, e, p, shift)
-        key = (tuple(e.coordinates.items()), tuple(e.rates.items()), np.asarray(p, dtype=float).tobytes(),
-               tuple(shift.items()))
-        if key not in memo:
-            memo[key] = _physical(problem, e, p, shift)
-        return memo[key]
 
-    ref = physical(a, {})
-    tol = 1e-7 * (1.0 + float(np.max(np.abs(ref)))) if ref.size else 1e-7
-    turning = [c for c in problem.cyclic if problem.angles.get(c, False)][:3]
-    for halves in itertools.product((0.0, math.pi), repeat=len(turning)):
-        if np.max(np.abs(physical(b, dict(zip(turning, halves))) - ref), initial=0.0) <= tol:
-            return True
-    return False
+class _Motions:
+    """Steady motions kept so far, each new one compared with all of them at once (numpy arrays of their rates,
+    physical states and tolerances): same_motion(kept, new) for every kept motion, which review asked pair by
+    pair, quadratic in the roots in Python (the 20-link chain's 504 roots: 127,000 pairs)."""
+
+    def __init__(self, problem: EquilibriumProblem, p: np.ndarray, memo: dict) -> None:
+        self.problem, self.p, self.memo = problem, p, memo
+        self.names: list[str] | None = None
+        self.rates: list[list[float]] = []
+        self.refs: list[np.ndarray] = []
+        self.tols: list[float] = []
+
+    def _rates(self, e: Equilibrium) -> list[float]:
+        """The rates in the kept motions' order (one problem's motions share the rates' names)."""
+        if self.names is None:
+            self.names = list(e.rates)
+        return [e.rates.get(c, 0.0) for c in self.names]
+
+    def first_same(self, e: Equilibrium) -> int | None:
+        """The position (in the order kept) of the first kept motion that is ``e``, or None."""
+        if not self.refs:
+            return None
+        kept_rates, rates = np.array(self.rates, dtype=float), np.array(self._rates(e), dtype=float)
+        match = ~np.any(np.abs(kept_rates - rates) > 1e-7 * (1 + np.abs(kept_rates)), axis=1)
+        refs, tols = np.array(self.refs), np.array(self.tols)
+        same = np.zeros(len(refs), dtype=bool)
+        for state in _shifted_states(self.problem, e, self.p, self.memo):
+            same |= np.max(np.abs(refs - state), axis=1, initial=0.0) <= tols
+        hits = np.flatnonzero(match & same)
+        return int(hits[0]) if hits.size else None
+
+    def keep(self, e: Equilibrium, at: int | None = None) -> None:
+        """Remember ``e`` as a new kept motion, or in place of the one at position ``at``."""
+        ref, tol = _reference(self.problem, e, self.p, self.memo)
+        row = (self._rates(e), ref, tol)
+        if at is None:
+            self.rates.append(row[0])
+            self.refs.append(row[1])
+            self.tols.append(row[2])
+        else:
+            self.rates[at], self.refs[at], self.tols[at] = row
 
 
 def _conventional(problem: EquilibriumProblem, e: Equilibrium) -> bool:
@@ -224,16 +278,18 @@ def review(problem: EquilibriumProblem, equilibria: list[Equilibrium], p: np.nda
     reason; candidates that are no steady motion in a regular chart (artefacts of the singular one) are dropped.
     Returns the equilibria kept and a note (empty when nothing happened)."""
     kept, dropped, undecided, seen, regular = [], 0, 0, set(), []
-    states: dict = {}  # each root's physical state computed once (the pairs are quadratic in the roots)
+    motions = _Motions(problem, p, {})  # the regular ones, in the order of `regular`
     for e in equilibria:
         found = singularities(problem.model, e.coordinates, p)
         if not found:
-            k = next((i for i in regular if same_motion(problem, kept[i], e, p, states)), None)
-            if k is None:
+            j = motions.first_same(e)
+            if j is None:
                 regular.append(len(kept))
                 kept.append(e)
-            elif _conventional(problem, e) and not _conventional(problem, kept[k]):
-                kept[k] = e  # show the conventional coordinates (e.g. |theta| <= pi/2 for zyx, r >= 0)
+                motions.keep(e)
+            elif _conventional(problem, e) and not _conventional(problem, kept[regular[j]]):
+                kept[regular[j]] = e  # show the conventional coordinates (e.g. |theta| <= pi/2 for zyx, r >= 0)
+                motions.keep(e, j)
             continue
         where = found[0]
         e.chart = where.describe()

@@ -283,10 +283,15 @@ class EquilibriumProblem:
         return z
 
     def distance(self, a: np.ndarray, b: np.ndarray) -> float:
-        d = a - b
+        return float(self.distances(a, np.asarray(b, dtype=float)[None, :])[0])
+
+    def distances(self, z: np.ndarray, others: np.ndarray) -> np.ndarray:
+        """The distance of z to each row of ``others`` in the coordinates and rates, angle differences taken on
+        the circle (the remainder of 2 pi, as wrap())."""
+        d = np.asarray(others, dtype=float) - z
         ang = self.is_angle()
-        d[ang] = [wrap(x) for x in d[ang]]
-        return float(np.linalg.norm(d[: self.nq + len(self.rate_unknowns)]))
+        d[:, ang] -= 2 * math.pi * np.rint(d[:, ang] / (2 * math.pi))
+        return np.linalg.norm(d[:, : self.nq + len(self.rate_unknowns)], axis=1)
 
     def split_singularity(self, z: np.ndarray, p: np.ndarray) -> str | None:
         """Why the coordinates the analysis eliminates are not determined at z (a coordinate singularity of the
@@ -662,8 +667,10 @@ def singular_note(problem: EquilibriumProblem, dropped: dict[str, list[np.ndarra
 def is_new_root(problem: EquilibriumProblem, z: np.ndarray, roots: list[np.ndarray]) -> bool:
     """z is not a root already found: none closer than 1e-7 (1 + |z|) in the coordinates and rates (angles on the
     circle)."""
+    if not len(roots):
+        return True
     size = float(np.linalg.norm(z[: problem.nq + len(problem.rate_unknowns)]))
-    return not any(problem.distance(z, r) < 1e-7 * (1 + size) for r in roots)
+    return not bool(np.any(problem.distances(z, np.asarray(roots)) < 1e-7 * (1 + size)))
 
 
 def _onto_constraints(problem: EquilibriumProblem, start: np.ndarray, p: np.ndarray) -> np.ndarray:
