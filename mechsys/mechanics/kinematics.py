@@ -95,7 +95,8 @@ class FrameState:
                 R, pure_axis, total = merged
                 return FrameState(R, self.origin, omega, alpha, self.v, self.a, True, pure_axis, total, v_own, a_own)
             return FrameState(product(self.R, R_rel), self.origin, omega, alpha, v_own, a_own, False)
-        return FrameState(product(self.R, R_rel), self.origin, omega, alpha, product(R_rel.T, self.v), product(R_rel.T, self.a), False)
+        return FrameState(product(self.R, R_rel), self.origin, omega, alpha, product(R_rel.T, self.v),
+                          product(R_rel.T, self.a), False)
 
     def translated(self, offset: sp.Matrix, rate: sp.Matrix, accel0: sp.Matrix) -> "FrameState":
         """This frame moved by ``offset`` given in its own axes (``rate``, ``accel0``: its derivatives)."""
