@@ -25,13 +25,28 @@ import numpy as np
 from mechsys.errors import AnalysisError
 
 TEMPLATE = Path(__file__).with_name("dop853.c")
-BUDGET_SPENT = ("the step budget (--max-steps) is spent: a stiff scene (try --method Radau or CVODE) or a discontinuous "
-                "law such as sign() of a rate that the integrator chatters on")
+BUDGET_SPENT = "the step budget (--max-steps) is spent"
+IMPLICIT_METHODS = ("Radau", "BDF", "LSODA", "CVODE")
+
+
+def budget_spent(method: Optional[str] = None) -> str:
+    """BUDGET_SPENT and what may cause it with the method that was integrating: an explicit method is slowed by a
+    stiff scene; an implicit one, which takes stiff decay in its stride, by fast oscillations it must follow
+    period by period (a stiff undamped spring), where its Python steps cost more than the compiled DOP853's.
+    Either may chatter on a discontinuous law."""
+    if method in IMPLICIT_METHODS:
+        cause = (f"fast undamped oscillations that {method} follows period by period (a stiff spring without "
+                 "damping: --method native, the compiled DOP853, follows them far faster; or a looser --rtol)")
+    else:
+        cause = "a stiff scene (try --method Radau or CVODE)"
+    return f"{BUDGET_SPENT}: {cause} or a discontinuous law such as sign() of a rate that the integrator chatters on"
+
+
 _STATUS = {-1: "the step size became too small",
            -2: "the mass matrix (or, with constraints, [[M, A^T], [A, 0]]: redundant constraints or a singular "
                "configuration) is singular",
            -3: "the state or its derivative is not finite", -4: "an output time lies past the end",
-           -5: BUDGET_SPENT}
+           -5: budget_spent("native")}
 
 
 def compiler() -> Optional[str]:

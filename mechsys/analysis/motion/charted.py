@@ -329,7 +329,7 @@ def simulate_charted(model: MechanicalModel, t_end: float, dt: Optional[float] =
     if not joints:
         return simulate(model, t_end, dt, method, rtol, atol, overrides_p, capture_velocity, progress, max_steps)
     from mechsys.numeric.parameters import parameter_values
-    from mechsys.numeric.native import BUDGET_SPENT
+    from mechsys.numeric.native import BUDGET_SPENT, budget_spent
 
     started = time.perf_counter()
     p = parameter_values(model) if overrides_p is None else overrides_p
@@ -345,7 +345,7 @@ def simulate_charted(model: MechanicalModel, t_end: float, dt: Optional[float] =
             cap: float = math.inf) -> SimulationResult:
         left = min(max_steps - totals["used"], cap)
         if left < 1:
-            raise AnalysisError(f"integration stopped at t = {shift:.6g}: {BUDGET_SPENT}")
+            raise AnalysisError(f"integration stopped at t = {shift:.6g}: {budget_spent(tol['method'])}")
         t1 = time.perf_counter()
         res = simulate(m, length, h, tol["method"], tol["rtol"], tol["atol"], p, capture_velocity,
                        None if progress is None else (lambda t: progress(shift + t)), left)

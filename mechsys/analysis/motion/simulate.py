@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING, Any, Callable
 import numpy as np
 
 from mechsys.errors import AnalysisError, InputError
-from mechsys.numeric.native import BUDGET_SPENT
+from mechsys.numeric.native import budget_spent
 
 if TYPE_CHECKING:  # sympy and the model are imported only where used: a warm run (motion/warm.py) needs neither
     from mechsys.mechanics.model import MechanicalModel
@@ -265,6 +265,7 @@ class RightHandSide:
         self.slow_windows = 0  # consecutive windows at a pace that would overspend the budget
         self.persistent = []
         self.progress = progress  # progress(t), called every 200 evaluations
+        self.method: str | None = None  # the integrating method, for the budget's message (set by simulate)
 
     persistent: list[int] = []  # indices of captured (resting) gap contacts, added as constraint rows
 
@@ -311,7 +312,7 @@ class RightHandSide:
         if self.slow_windows >= SLOW_WINDOWS:
             pace = f"advanced {progress:.3g} s; at that pace the remaining {remaining:.3g} s would need about " \
                 f"{needed:.3g} evaluations" if progress > 0 else "did not advance the time at all"
-            raise AnalysisError(f"integration stopped at t = {self.front:.6g}: {BUDGET_SPENT} (the last "
+            raise AnalysisError(f"integration stopped at t = {self.front:.6g}: {budget_spent(self.method)} (the last "
                                 f"{BUDGET_WINDOW} right-hand-side evaluations {pace}, with "
                                 f"{self.max_calls - self.calls:.3g} left of the budget of {self.max_calls:.3g}; "
                                 "raise --max-steps if the run is only slow to start)")
@@ -319,7 +320,7 @@ class RightHandSide:
     def __call__(self, t: float, y: np.ndarray) -> np.ndarray:
         self.calls += 1
         if self.calls > self.max_calls:
-            raise AnalysisError(f"integration stopped at t = {t:.6g}: {BUDGET_SPENT}")
+            raise AnalysisError(f"integration stopped at t = {t:.6g}: {budget_spent(self.method)}")
         self.front = max(self.front, t)
         if self.window_front is None:
             self.window_front = t
@@ -801,6 +802,7 @@ def simulate(model: MechanicalModel, t_end: float, dt: float | None = None, meth
             rtol, atol = rtol / CVODE_TIGHTENING, atol / CVODE_TIGHTENING
     elif method == "CVODE":
         cvode_usable(c, True)
+    rhs.method = chosen
     grid = output_grid(t_end, dt)
     t1 = time.perf_counter()
     n = c.n
