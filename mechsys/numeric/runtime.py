@@ -35,7 +35,8 @@ def check_source(source: str) -> ast.Module:
     fn = tree.body[0]
     if fn.decorator_list or fn.returns or fn.args.defaults or fn.args.vararg or fn.args.kwarg or fn.args.kwonlyargs:
         raise ValueError("generated _f must take plain positional arguments")
-    # names and constants a parent allows: `math` under math.<function>, the strings of float('nan'), ...
+    # names and constants a parent allows: `math` under math.<function>, the strings of float('nan'), ... (ast.walk
+    # is breadth-first: a parent is checked, and allows its child, before the child comes)
     allowed_math, allowed_words = set(), set()
     for node in ast.walk(fn):
         kind = type(node)
