@@ -13,7 +13,8 @@ import sympy as sp
 
 from mechsys.codegen.names import MODULES, mangle
 from mechsys.errors import AnalysisError, InputError
-from mechsys.numeric.lambdify import value_and_jacobian_program
+from mechsys.mechanics.products import product
+from mechsys.numeric.lambdify import ForwardProgram, compile_program, differentiate_program, shared_program
 from mechsys.report.files import cannot_write
 
 if TYPE_CHECKING:
@@ -46,28 +47,11 @@ class Program:
         return cls(list(replacements), list(reduced))
 
     @classmethod
-    def jacobian(cls, exprs: Sequence[sp.Expr], wrt: Sequence[sp.Symbol]) -> "Program":
-        """The Jacobian of ``exprs`` with respect to ``wrt``, row by row, exact: the forward differentiation over
-        one CSE that the compiled steady-motion pieces use (numeric/lambdify.value_and_jacobian_program; seconds
-        for the bicycle, where sympy's ``jacobian`` of the expanded equations takes minutes)."""
-        fp = value_and_jacobian_program(exprs, list(wrt), wrt)
-        steps = [(fp.symbols[name], value) for name, value in fp.values + fp.derivatives]
-        return cls(steps, list(fp.jacobian)).tidied().pruned()
-
-    def tidied(self) -> "Program":
-        """Temporaries that hold a number or a symbol inlined, and subexpressions equal to an earlier temporary's
-        value replaced by it (the derivative of cos(x) reuses the temporary sin(x))."""
-        alias: dict = {}
-        known: dict = {}
-        steps = []
-        for sym, value in self.assignments:
-            value = value.xreplace(alias).xreplace(known)
-            if value.is_Atom:
-                alias[sym] = value
-                continue
-            known[value] = sym
-            steps.append((sym, value))
-        return Program(steps, [sp.sympify(e).xreplace(alias).xreplace(known) for e in self.outputs])
+    def part(cls, program: "ForwardProgram", outputs: Sequence[sp.Expr]) -> "Program":
+        """``outputs`` (in terms of ``program``'s temporaries) with the temporaries of ``program`` they need: one
+        function of a package from the CSE all of them share."""
+        steps = [(program.symbols[name], value) for name, value in program.values + program.derivatives]
+        return cls(steps, list(outputs)).pruned()
 
     def pruned(self) -> "Program":
         """Without the temporaries no output needs."""
@@ -257,7 +241,6 @@ def derive_package(model: "MechanicalModel", method: str = "lagrange") -> Packag
     if not model.q:
         raise InputError("the model has no free coordinates: there is no motion to generate code for")
     eq = model.equations(method)
-    _check_regular(model, eq)
     doc = model.doc
     prefix = mangle([model.name], MODULES)[model.name][:MAX_PREFIX]
     functions = {f"{prefix}_{name}" for name in FUNCTIONS} | {prefix}
@@ -287,25 +270,37 @@ def derive_package(model: "MechanicalModel", method: str = "lagrange") -> Packag
     def add(name: str, args: tuple[str, ...], shape: tuple[int, ...], program: Program, summary: str) -> None:
         pkg.functions[name] = Function(name, args, shape, program, summary)
 
-    add("mass_matrix", STATE_ARGS, (n, n), Program.of(list(eq.M)), "mass matrix M")
-    add("forcing", STATE_ARGS, (n,), Program.of(list(eq.f)), "forcing f (M q'' = f + A^T lam)")
+    # M, f, A and b from one CSE (real temporaries: the Jacobian below differentiates it), each function the part
+    # of it that its outputs need; the Jacobian of the residual by forward differentiation of that CSE
+    wrt = [*model.q, *model.u]
+    blocks = [list(eq.M), list(eq.f)] + ([list(eq.A), list(eq.b)] if m else [])
+    shared = shared_program([e for block in blocks for e in block],
+                            [model.t, *model.q, *model.u, *model.parameter_symbols], wrt)
+    parts, start = [], 0
+    for block in blocks:
+        parts.append(shared.outputs[start:start + len(block)])
+        start += len(block)
+    _check_regular(model, shared, n, m)
+    add("mass_matrix", STATE_ARGS, (n, n), Program.part(shared, parts[0]), "mass matrix M")
+    add("forcing", STATE_ARGS, (n,), Program.part(shared, parts[1]), "forcing f (M q'' = f + A^T lam)")
+    a = sp.Matrix(model.a)
+    residual = list(product(sp.Matrix(n, n, parts[0]), a) - sp.Matrix(parts[1]))
     if m:
         holonomic = model.holonomic_constraints
-        add("constraint_matrix", STATE_ARGS, (m, n), Program.of(list(eq.A)), "constraint matrix A (A q'' = b)")
-        add("constraint_rhs", STATE_ARGS, (m,), Program.of(list(eq.b)), "constraint right-hand side b")
+        A = sp.Matrix(m, n, parts[2])
+        add("constraint_matrix", STATE_ARGS, (m, n), Program.part(shared, parts[2]), "constraint matrix A (A q'' = b)")
+        add("constraint_rhs", STATE_ARGS, (m,), Program.part(shared, parts[3]), "constraint right-hand side b")
         add("constraint_velocity", STATE_ARGS, (m,), Program.of(list(model.constraint_velocity)),
             "velocity-level constraints A q' + a_t (zero on a consistent motion)")
         if len(holonomic):
             add("constraint_position", STATE_ARGS, (len(holonomic),), Program.of(list(holonomic)),
                 "position-level constraints Phi of the holonomic rows (zero on a consistent motion)")
+        residual = [r - e for r, e in zip(residual, product(A.T, sp.Matrix(lam)))]
+        residual += list(product(A, a) - sp.Matrix(parts[3]))
     add("kinetic_energy", STATE_ARGS, (), Program.of([eq.T]), "kinetic energy T")
     add("potential_energy", STATE_ARGS, (), Program.of([eq.V]), "potential energy V")
-    a = sp.Matrix(model.a)
-    residual = list(eq.M * a - eq.f - (eq.A.T * sp.Matrix(lam) if m else sp.zeros(n, 1)))
-    if m:
-        residual += list(eq.A * a - eq.b)
-    add("residual_jacobian", ("t", "q", "u", "a", "lam", "p"), (n + m, 2 * n),
-        Program.jacobian(residual, [*model.q, *model.u]),
+    jac = differentiate_program(ForwardProgram(shared.args, shared.values, [], shared.symbols, residual, []), wrt)
+    add("residual_jacobian", ("t", "q", "u", "a", "lam", "p"), (n + m, 2 * n), Program.part(jac, jac.jacobian),
         "Jacobian d[M q'' - f - A^T lam; A q'' - b]/d[q, q'] at given q'' and lam (exact, symbolic)")
     return pkg
 
@@ -321,22 +316,20 @@ def _expression(value: object) -> str:
     return ""
 
 
-def _check_regular(model: "MechanicalModel", eq) -> None:
+def _check_regular(model: "MechanicalModel", shared: "ForwardProgram", n: int, m: int) -> None:
     """AnalysisError when [[M, -A^T], [A, 0]] (M without constraints) is singular at the file's initial state, as
-    `mechsys simulate` refuses it: the generated accelerations would fail (or, in MATLAB, be Inf) from the start."""
+    `mechsys simulate` refuses it: the generated accelerations would fail (or, in MATLAB, be Inf) from the start.
+    ``shared``: the CSE of M, f, A and b (derive_package's), evaluated there."""
     import numpy as np
 
-    from mechsys.numeric.lambdify import compile_matrix
-
-    args = (model.t, model.q, model.u, model.parameter_symbols)
-    values = (0.0, [model.doc.initial[c] for c in model.coordinates],
-              [model.doc.initial_rate[c] for c in model.coordinates],
-              [model.parameters[s.name] for s in model.parameter_symbols])
-    M = np.asarray(compile_matrix(eq.M, *args)(*values), dtype=float)
-    K = M
-    if eq.A.shape[0]:
-        A = np.asarray(compile_matrix(eq.A, *args)(*values), dtype=float)
-        K = np.block([[M, -A.T], [A, np.zeros((A.shape[0], A.shape[0]))]])
+    values = (0.0, *[model.doc.initial[c] for c in model.coordinates],
+              *[model.doc.initial_rate[c] for c in model.coordinates],
+              *[model.parameters[s.name] for s in model.parameter_symbols])
+    out = np.asarray(compile_program(shared)(*values), dtype=float)
+    M = K = out[:n * n].reshape(n, n)
+    if m:
+        A = out[n * n + n:n * n + n + m * n].reshape(m, n)
+        K = np.block([[M, -A.T], [A, np.zeros((m, m))]])
     with np.errstate(all="ignore"):
         regular = bool(np.all(np.isfinite(K))) and np.linalg.cond(K) < 1e14
     if regular:

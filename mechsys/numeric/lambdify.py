@@ -18,7 +18,7 @@ from mechsys.numeric.runtime import StateFunction, function_from_source, matrix_
 
 __all__ = ["generate_source", "shared_cse", "compile_exprs", "matrix_source", "compile_matrix", "function_from_source",
            "matrix_from_source", "StateFunction", "value_and_jacobian_sources", "value_and_jacobian_program",
-           "ForwardProgram", "shared_program", "differentiate_program"]
+           "ForwardProgram", "shared_program", "differentiate_program", "compile_program"]
 
 
 class _Printer(PythonCodePrinter):
@@ -192,15 +192,33 @@ def needed_values(program: ForwardProgram, rows: int | None) -> set[str]:
     return needed
 
 
+def _plain(term: sp.Expr) -> bool:
+    """A term that a sum can hold as it is (not a number, not itself a sum)."""
+    return not (term.is_Number or term.is_Add)
+
+
+def _times(factor: sp.Expr, tangent: sp.Expr) -> sp.Expr:
+    """factor * tangent for a derivative's term: a temporary ``tangent`` (a symbol) appended to ``factor``'s own
+    factors, unsorted (sympy's Mul sorts its factors by comparing them: most of the time of a long chain's
+    Jacobian); a number through sympy's Mul."""
+    if not tangent.is_Symbol or factor.is_Number:
+        return factor * tangent
+    return sp.Mul._from_args((*factor.args, tangent) if factor.is_Mul else (factor, tangent))
+
+
 def differentiate_program(program: ForwardProgram, wrt: Sequence[sp.Symbol], rows: int | None = None) -> ForwardProgram:
     """``program`` (shared_program's) with the symbolic derivatives of its values and the Jacobian of its first
-    ``rows`` outputs with respect to ``wrt`` (a new program; ``program`` is left as it is)."""
+    ``rows`` outputs with respect to ``wrt`` (a new program; ``program`` is left as it is). A derivative that is
+    a number or a symbol gets no temporary (it is used in place), one equal to an earlier derivative reuses that
+    one's, and a partial derivative reads the subexpressions it shares with the program from their temporaries
+    (d cos(x)/dx = -sin(x) reads the temporary of sin(x))."""
     program = ForwardProgram(program.args, list(program.values), [], dict(program.symbols), program.outputs, [])
     reduced = program.outputs
     column = {w: j for j, w in enumerate(wrt)}
     ONE = sp.S.One
-    deriv: dict[sp.Symbol, dict[int, sp.Expr]] = {w: {j: ONE} for w, j in column.items()}
+    deriv: dict[sp.Basic, dict[int, sp.Expr]] = {w: {j: ONE} for w, j in column.items()}
     values = {program.symbols[name]: value for name, value in program.values}
+    known = {value: sym for sym, value in values.items()}  # a subexpression -> its temporary
     order = [program.symbols[name] for name, _ in program.values]
     index = {sym: k for k, sym in enumerate(order)}
     needed = {program.symbols[name] for name in needed_values(program, rows)}
@@ -209,17 +227,24 @@ def differentiate_program(program: ForwardProgram, wrt: Sequence[sp.Symbol], row
 
     def chain(value: sp.Expr) -> dict[int, sp.Expr]:
         terms: dict[int, list[sp.Expr]] = {}
-        for s in value.free_symbols:
-            ds = deriv.get(s)
-            if not ds:
-                continue
-            partial = diff(value, s)
-            if partial == 0:
-                continue
-            for j, dsj in ds.items():
-                terms.setdefault(j, []).append(partial if dsj is ONE else partial * dsj)
+        # a sum term by term: each term's partial derivatives by its own symbols (not the whole sum's derivative
+        # by every symbol of the sum, mostly zero terms)
+        for term in value.args if value.is_Add else (value,):
+            for s in diff.free(term):
+                ds = deriv.get(s)
+                if not ds:
+                    continue
+                partial = diff(term, s)
+                if partial == 0:
+                    continue
+                if not partial.is_Atom:
+                    partial = partial.xreplace(known)
+                for j, dsj in ds.items():
+                    terms.setdefault(j, []).append(partial if dsj is ONE else dsj if partial is ONE
+                                                   else _times(partial, dsj))
         # one Add per entry: adding term by term flattened the growing sum again at every term (quadratic)
-        out = {j: sp.Add(*t) for j, t in terms.items()}
+        out = {j: sp.Add(*t) if len(t) < 3 or any(not _plain(e) for e in t) else sp.Add._from_args(t)
+               for j, t in terms.items()}
         return {j: e for j, e in out.items() if e != 0}
 
     for sym in order:
@@ -230,9 +255,12 @@ def differentiate_program(program: ForwardProgram, wrt: Sequence[sp.Symbol], row
         if parts:
             own = {}
             for j, e in parts.items():
-                d = sp.Dummy(f"d{k}_{j}", real=True)  # never equal to an input
-                program.symbols[f"d{k}_{j}"] = d
-                program.derivatives.append((f"d{k}_{j}", e))
+                d = e if e.is_Atom else known.get(e)
+                if d is None:
+                    d = sp.Dummy(f"d{k}_{j}", real=True)  # never equal to an input
+                    program.symbols[f"d{k}_{j}"] = d
+                    program.derivatives.append((f"d{k}_{j}", e))
+                    known[e] = d
                 own[j] = d
             deriv[sym] = own
     for e in reduced[:rows]:
@@ -258,6 +286,11 @@ def value_and_jacobian_sources(exprs: Sequence[sp.Expr], args: Sequence[sp.Symbo
     plain = plain + ["    return [" + ", ".join(outputs) + "]"]
     lines.append("    return [" + ", ".join(outputs + jacobian) + "]")
     return "\n".join(plain), "\n".join(lines)
+
+
+def compile_program(program: ForwardProgram) -> Callable[..., list[float]]:
+    """A function of ``program.args`` returning ``program``'s outputs as floats (its values; no derivatives)."""
+    return function_from_source(value_and_jacobian_sources((), program.args, (), program=program)[0])
 
 
 def compile_exprs(exprs: Sequence[sp.Expr], args: Sequence[sp.Symbol]) -> Callable[..., list[float]]:
