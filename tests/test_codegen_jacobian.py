@@ -4,11 +4,14 @@ The package builds it by forward differentiation of one CSE of M and f (numeric/
 sums term by term, products left unsorted, derivatives that are numbers or symbols used in place). Here the
 reference is sympy's own `jacobian` of M a - f from tests/reference_mechanics.py (plain sympy from T and V,
 nothing of mechsys) on models written as a user would: the Furuta pendulum and a heavy top (tests/data/beyond/),
-and a four-link chain of rods with relative angles written below, with its Lagrangian built here by hand."""
+and a four-link chain of rods with relative angles written below, with its Lagrangian built here by hand. And
+the generated code is the same in every process."""
 from __future__ import annotations
 
 import functools
 import importlib.util
+import os
+import subprocess
 import sys
 
 import numpy as np
@@ -108,3 +111,19 @@ def test_residual_jacobian_equals_sympys_jacobian_of_the_reference(case, method,
         got = J[np.ix_(order, columns)]
         scale = max(1.0, float(np.abs(want).max()))
         np.testing.assert_allclose(got, want, rtol=0, atol=1e-10 * scale)
+
+
+@pytest.mark.parametrize("method", ["lagrange", "kane"])
+def test_the_generated_code_does_not_change_with_the_process(method, tmp_path):
+    """Two `codegen` runs whose string hashing differs (PYTHONHASHSEED: the order of every set of symbols) write
+    the same files: the derivatives are formed in program order, not in a set's order."""
+    path = tmp_path / "rods.yaml"
+    path.write_text(CHAIN)
+    written = []
+    for seed in ("1", "2"):
+        out = tmp_path / f"package{seed}"
+        env = dict(os.environ, PYTHONHASHSEED=seed, MECHSYS_CACHE="off")
+        subprocess.run([sys.executable, "-m", "mechsys", "codegen", str(path), "-t", "python", "--method", method,
+                        "-o", str(out)], env=env, check=True, capture_output=True)
+        written.append({f.name: f.read_text() for f in sorted(out.iterdir())})
+    assert written[0] == written[1]

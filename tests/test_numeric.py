@@ -51,6 +51,25 @@ def test_forward_jacobian_of_abs_and_of_an_input_named_like_a_temporary():
         assert out[2:] == pytest.approx(want, rel=1e-12, abs=1e-12)
 
 
+def test_the_chain_rule_sums_a_symbols_partials_before_it_multiplies():
+    """differentiate_program differentiates a sum term by term but multiplies each symbol's summed partial once by
+    that symbol's tangent: d(x y + x z)/dq = (y + z) dx, not y dx + z dx (the distributed form cost the bicycle's
+    generated Jacobian 5 % more operations and gcc 50 % more time at -O2). Numbers and symbols get no temporary."""
+    import sympy as sp
+
+    from mechsys.numeric.lambdify import differentiate_program, shared_program
+
+    q, y, z = sp.symbols("q y z", real=True)
+    exprs = [sp.sin(q) * y + sp.sin(q) * z + 3 * q, sp.sin(q) * (y - z)]
+    program = shared_program(exprs, [q, y, z], [q])
+    assert [str(v) for _, v in program.values] == ["sin(q)"]
+    jac = differentiate_program(program, [q])
+    assert len(jac.derivatives) == 1  # d sin(q)/dq = cos(q); 3 * 1 and the sums are no temporaries
+    tangent = jac.symbols[jac.derivatives[0][0]]
+    assert jac.jacobian[0] == (y + z) * tangent + 3
+    assert jac.jacobian[1] == (y - z) * tangent
+
+
 def test_a_remembered_cse_is_the_cse_computed_afresh_for_the_same_expressions():
     """shared_cse remembers its latest results (one command compiles M for the cyclic test and for info; a first
     simulate prints the same expressions as Python and as C): the key is the expressions in order and the kind of

@@ -221,27 +221,34 @@ def differentiate_program(program: ForwardProgram, wrt: Sequence[sp.Symbol], row
     known = {value: sym for sym, value in values.items()}  # a subexpression -> its temporary
     order = [program.symbols[name] for name, _ in program.values]
     index = {sym: k for k, sym in enumerate(order)}
+    rank = {**column, **{sym: len(wrt) + k for k, sym in enumerate(order)}}
     needed = {program.symbols[name] for name in needed_values(program, rows)}
 
     diff = Differentiator()  # sympy's diff, each subexpression once
 
     def chain(value: sp.Expr) -> dict[int, sp.Expr]:
         terms: dict[int, list[sp.Expr]] = {}
-        # a sum term by term: each term's partial derivatives by its own symbols (not the whole sum's derivative
-        # by every symbol of the sum, mostly zero terms)
+        # a sum's partial derivatives term by term, each term by its own symbols (not the whole sum by every
+        # symbol of the sum: mostly zero terms), summed per symbol before the chain rule multiplies (a distributed
+        # product costs operations in the code and gcc's register allocation time on large Jacobians)
+        partials: dict[sp.Basic, list[sp.Expr]] = {}
         for term in value.args if value.is_Add else (value,):
             for s in diff.free(term):
-                ds = deriv.get(s)
-                if not ds:
-                    continue
-                partial = diff(term, s)
-                if partial == 0:
-                    continue
-                if not partial.is_Atom:
-                    partial = partial.xreplace(known)
-                for j, dsj in ds.items():
-                    terms.setdefault(j, []).append(partial if dsj is ONE else dsj if partial is ONE
-                                                   else _times(partial, dsj))
+                if s in deriv:
+                    partial = diff(term, s)
+                    if partial != 0:
+                        partials.setdefault(s, []).append(partial)
+        # in program order, not in the set's (whose order changes with the process's string hashing): the
+        # generated code is the same on every run
+        for s in sorted(partials, key=rank.__getitem__):
+            partial = sp.Add(*partials[s])
+            if partial == 0:
+                continue
+            if not partial.is_Atom:
+                partial = partial.xreplace(known)
+            for j, dsj in deriv[s].items():
+                terms.setdefault(j, []).append(partial if dsj is ONE else dsj if partial is ONE
+                                               else _times(partial, dsj))
         # one Add per entry: adding term by term flattened the growing sum again at every term (quadratic)
         out = {j: sp.Add(*t) if len(t) < 3 or any(not _plain(e) for e in t) else sp.Add._from_args(t)
                for j, t in terms.items()}
