@@ -25,8 +25,8 @@ Wall times are reported, never asserted.
     python benchmarks/derive_chain.py --commands        # the CLI commands users run, n = 5 10 20 40 80
 
 With --commands the script times what users run instead: whole `mechsys` processes (imports included) on the
-chain's YAML file, `derive -f json` with the default method (Lagrange) and with `--method kane`, `info` and
-`equilibria`, each cold (a fresh private cache folder) and then cached (the same command again), against the
+chain's YAML file, `derive -f json` with the default method (Lagrange) and with `--method kane`, `info`,
+`equilibria` and `codegen -t python --method kane` (the generated package), each cold (a fresh private cache folder) and then cached (the same command again), against the
 issue's goals (20-link `derive` under 1 s with every method, n = 80 under 20 s) and the absolute-angle baseline.
 """
 from __future__ import annotations
@@ -283,6 +283,7 @@ COMMANDS = {  # label -> mechsys arguments after the file
     "derive --method kane": ["derive", "--method", "kane", "-f", "json", "-o", "{out}"],
     "info": ["info"],
     "equilibria": ["equilibria"],
+    "codegen --method kane": ["codegen", "-t", "python", "--method", "kane", "-o", "{pkg}"],
 }
 GOAL_DERIVE_N20, GOAL_DERIVE_N80 = 1.0, 20.0  # seconds, whole process (issue 13)
 
@@ -316,8 +317,8 @@ def main_commands(ns: list[int], timeout: float, baseline: bool) -> int:
             cells, row = [], {"n": n}
             for label in labels:
                 cache = Path(tmp) / f"cache{n}-{labels.index(label)}"
-                args = [a.format(out=Path(tmp) / "out.json") for a in [COMMANDS[label][0], str(model),
-                                                                       *COMMANDS[label][1:]]]
+                args = [a.format(out=Path(tmp) / "out.json", pkg=Path(tmp) / f"package{n}")
+                        for a in [COMMANDS[label][0], str(model), *COMMANDS[label][1:]]]
                 cold, rc = time_command(args, cache, timeout)
                 warm, rc2 = time_command(args, cache, timeout) if cold is not None else (None, None)
                 failed |= bool(rc) or bool(rc2)
@@ -361,8 +362,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--top", type=int, default=25, help="rows printed by --profile")
     ap.add_argument("--json", metavar="FILE", help="also write the raw results as JSON")
     ap.add_argument("--commands", action="store_true",
-                    help="time the CLI commands users run (derive each method, info, equilibria), cold and cached; "
-                         "default n = 5 10 20 40 80")
+                    help="time the CLI commands users run (derive each method, info, equilibria, codegen), cold and "
+                         "cached; default n = 5 10 20 40 80")
     ap.add_argument("--worker", choices=["mechsys", *BASELINES.values()], help=argparse.SUPPRESS)
     ap.add_argument("--yaml", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)

@@ -1068,7 +1068,8 @@ def codegen(
     an FMI 2.0 Model Exchange FMU."""
 
     def body() -> int:
-        from mechsys.codegen import check_destination, check_target, write_package
+        from mechsys.codegen import check_destination, check_target, render, write_directory
+        from mechsys.report import warm
 
         if check_target(target) == "fmu":
             from mechsys.codegen.fmu import check_fmu_output, find_gcc, write_fmu
@@ -1081,8 +1082,15 @@ def codegen(
             sys.stdout.write(summary.line() + "\n")
             return 0
         check_destination(output)
-        files = write_package(load_model(file, set_), target, output, method.value)
-        sys.stdout.write(f"wrote {output}: {', '.join(files)}\n")
+        # the file's name is printed in the package (its README and headers), not only its content
+        key = warm.output_key("codegen", file, {"set": list(set_ or []), "method": method.value, "target": target,
+                                                "name": file.name})
+        files = warm.load_files(key)
+        if files is None:
+            files = render(load_model(file, set_), target, method.value)
+            warm.store_files(key, files)
+        write_directory(output, files)
+        sys.stdout.write(f"wrote {output}: {', '.join(sorted(files))}\n")
         return 0
 
     run(body)

@@ -216,3 +216,39 @@ def test_kept_tables_read_back_as_printed_and_damaged_ones_are_ignored(tmp_path,
 
     warm.store_tables("f" * 32, [Table("t", ["a"], [[np.int64(3)]])], None)  # not a plain cell: not kept
     assert cache.load("f" * 32) is None
+
+
+def test_a_second_codegen_writes_the_same_files_without_sympy(tmp_path, monkeypatch):
+    """codegen keeps the package's files: the repeat writes them byte for byte without sympy; an edited file, a
+    file of another name (printed in the package), another method and a damaged entry take the full path."""
+    model = tmp_path / "four_bar.yaml"
+    shutil.copy(SYSTEMS_DIR / "four_bar.yaml", model)
+
+    def files(folder):
+        return {f.name: f.read_bytes() for f in sorted(folder.iterdir())}
+
+    first, sympy1 = _probe(tmp_path / "cache", "codegen", model, "-t", "c", "-o", tmp_path / "a")
+    second, sympy2 = _probe(tmp_path / "cache", "codegen", model, "-t", "c", "-o", tmp_path / "b")
+    assert sympy1 is True and sympy2 is False
+    assert first.replace(str(tmp_path / "a"), "") == second.replace(str(tmp_path / "b"), "")
+    assert files(tmp_path / "a") == files(tmp_path / "b")
+    fresh = tmp_path / "fresh"
+    _cli(monkeypatch, tmp_path / "off", "codegen", model, "-t", "c", "-o", fresh)  # another cache: the full path
+    assert files(fresh) == files(tmp_path / "a")
+
+    renamed = tmp_path / "linkage.yaml"
+    shutil.copy(model, renamed)
+    _, sympy3 = _probe(tmp_path / "cache", "codegen", renamed, "-t", "c", "-o", tmp_path / "c")
+    assert sympy3 is True and "linkage.yaml" in (tmp_path / "c" / "README.md").read_text()
+    _, sympy4 = _probe(tmp_path / "cache", "codegen", model, "-t", "c", "-m", "kane", "-o", tmp_path / "d")
+    assert sympy4 is True
+    model.write_text(model.read_text().replace("name: four_bar", "name: edited_bar"))
+    _, sympy5 = _probe(tmp_path / "cache", "codegen", model, "-t", "c", "-o", tmp_path / "e")
+    assert sympy5 is True and "edited_bar" in (tmp_path / "e" / "README.md").read_text()
+
+    monkeypatch.setenv("MECHSYS_CACHE", str(tmp_path / "cache"))
+    key = warm.output_key("codegen", model, {"set": [], "method": "lagrange", "target": "c", "name": model.name})
+    assert warm.load_files(key) is not None  # the key the command uses
+    for damaged in ({"files": {"../escape.c": "x"}}, {"files": {"a.c": 1}}, {"files": {}}, {"text": "x"}):
+        cache.store(key, damaged)
+        assert warm.load_files(key) is None

@@ -1,8 +1,9 @@
-"""Warm outputs of `derive`, `info`, `equilibria` and `modes`: kept by the file's bytes and the options, so a
+"""Warm outputs of `derive`, `info`, `equilibria`, `modes` and `codegen`: kept by the file's bytes and the options, so a
 repeated command prints without sympy (no import, no model build: a second `derive` of the bicycle in a third of
 a second).
 
-What is kept is data: derive's printed text, info's facts (analysis/facts.py `Info`, rendered again in the format
+What is kept is data: derive's printed text, the files of a generated package (text; not an FMU, which gcc
+builds), info's facts (analysis/facts.py `Info`, rendered again in the format
 asked), the tables and JSON payload of `equilibria` and `modes` (rendered again, so a text table fits the
 terminal). The key is the file's bytes, the command, every option that shapes the output (the `--set`
 assignments in their order), mechsys's version, the source of the whole package and the versions of sympy, numpy
@@ -70,6 +71,22 @@ def load_text(key: str | None) -> str | None:
 def store_text(key: str | None, text: str) -> None:
     if key is not None:
         cache.store(key, {"text": text})
+
+
+def load_files(key: str | None) -> dict[str, str] | None:
+    """Kept files of a generated package (name -> text), or None when missing or not of that shape."""
+    entry = cache.load(key) if key is not None else None
+    files = entry.get("files") if entry is not None else None
+    if not isinstance(files, dict) or not files or not all(
+            isinstance(k, str) and isinstance(v, str) and k and "/" not in k and k not in (".", "..")
+            for k, v in files.items()):
+        return None
+    return files
+
+
+def store_files(key: str | None, files: dict[str, str]) -> None:
+    if key is not None:
+        cache.store(key, {"files": dict(files)})
 
 
 def load_info(key: str | None):
