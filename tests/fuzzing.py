@@ -41,7 +41,7 @@ DEFAULT_SEED = 20240521
 
 # seconds a command may take on a loaded 2-core machine before it counts as a hang
 TIMEOUTS = {"info": 90, "derive": 120, "equilibria": 180, "modes": 180, "simulate": 120, "collide": 90,
-            "inverse": 90}
+            "inverse": 90, "codegen": 120}
 # models whose equilibria/modes take 10-30 s already unmutated (slow suite only), and over 40 s (never)
 SLOW_ANALYSIS = {"torque_free_body", "newton_cradle", "winch_gear"}
 VERY_SLOW_ANALYSIS = {"friction_sphere_3d", "two_free_bodies"}
@@ -460,7 +460,8 @@ class Command:
         return [sys.executable, "-m", "mechsys", self.name, str(model), *args]
 
     def pretty(self, model: str = "mutant.yaml") -> str:
-        return " ".join(["mechsys", self.name, model] + [a.replace("{out}", "OUT.csv") for a in self.args])
+        out = "OUT" if self.name == "codegen" else "OUT.csv"
+        return " ".join(["mechsys", self.name, model] + [a.replace("{out}", out) for a in self.args])
 
 
 def set_options(rng: random.Random, data: dict) -> list[str]:
@@ -517,6 +518,9 @@ def _analysis_command(rng: random.Random, name: str, sets: list[str]) -> Command
         extra = ["--percussion"]
     elif name == "inverse" and rng.random() < 0.5:
         extra = ["--at", rng.choice(["0.3", "2", "-1"])]
+    elif name == "codegen":  # a package folder ({out}), compared file by file between cold and warm
+        return Command(name, ["-t", rng.choice(["python", "c", "matlab"]), "-m", rng.choice(["lagrange", "kane"]),
+                              "-o", "{out}"] + sets, TIMEOUTS[name], ("cold", "warm"))
     return Command(name, ["-f", "json"] + extra + sets, TIMEOUTS[name], ("cold", "warm"))
 
 
@@ -532,8 +536,8 @@ def plan_commands(rng: random.Random, base: BaseModel, data: dict, slow: bool) -
     analyses.append("inverse")
     simulate = Command("simulate", simulate_args(rng) + sets, TIMEOUTS["simulate"], ("cold", "warm", "off"))
     if not slow:
-        return [simulate, _analysis_command(rng, rng.choice(["info", "derive"] + analyses), sets)]
-    cmds = [_analysis_command(rng, rng.choice(["info", "derive"]), sets), simulate]
+        return [simulate, _analysis_command(rng, rng.choice(["info", "derive", "codegen"] + analyses), sets)]
+    cmds = [_analysis_command(rng, rng.choice(["info", "derive", "codegen"]), sets), simulate]
     if analyses:
         cmds.append(_analysis_command(rng, rng.choice(analyses), sets))
     return cmds
@@ -647,6 +651,18 @@ def read_csv(path: Path) -> tuple[list[str], np.ndarray]:
     names = header.strip().split(",")
     arr = np.loadtxt(io.StringIO(body), delimiter=",", ndmin=2) if body.strip() else np.zeros((0, len(names)))
     return names, arr
+
+
+def compare_folders(a: Path, b: Path) -> str | None:
+    """None when the two folders hold the same files, byte for byte (a generated package: the same code on every
+    run, kept or not), else the first difference."""
+    files_a, files_b = sorted(f.name for f in a.iterdir()), sorted(f.name for f in b.iterdir())
+    if files_a != files_b:
+        return f"files differ: {files_a} vs {files_b}"
+    for name in files_a:
+        if (a / name).read_bytes() != (b / name).read_bytes():
+            return f"{name} differs"
+    return None
 
 
 def compare_tables(a: tuple[list[str], np.ndarray], b: tuple[list[str], np.ndarray], rtol: float = COMPARE_RTOL,
@@ -770,7 +786,8 @@ def run_example(index: int, seed: int, bases: list[BaseModel], workdir: Path, sl
         runs: dict[str, Run] = {}
         cache = folder / f"cache{k}-{cmd.name}"
         for mode in cmd.modes:
-            out = folder / f"{cmd.name}{k}-{mode}.csv" if "{out}" in cmd.args else None
+            suffix = "" if cmd.name == "codegen" else ".csv"  # codegen writes a folder
+            out = folder / f"{cmd.name}{k}-{mode}{suffix}" if "{out}" in cmd.args else None
             run = run_cli(cmd.argv(model, out), "off" if mode == "off" else str(cache), cmd.timeout, folder,
                           f"{cmd.name}/{mode}", out)
             runs[mode] = run
@@ -804,7 +821,8 @@ def run_example(index: int, seed: int, bases: list[BaseModel], workdir: Path, sl
                 if not (cold.output.exists() and run.output and run.output.exists()):
                     fail(cmd, mode, run, "exit 0 but no result file", "")
                     continue
-                diff = compare_tables(read_csv(cold.output), read_csv(run.output))
+                diff = compare_folders(cold.output, run.output) if cold.output.is_dir() else \
+                    compare_tables(read_csv(cold.output), read_csv(run.output))
                 if diff:
                     fail(cmd, mode, run, f"{mode} result differs from the cold one", diff)
             else:

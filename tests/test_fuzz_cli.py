@@ -5,14 +5,15 @@ reach an analysis. Here the mutants are small edits of VALID bundled models (sys
 parameter values scaled, negated, zeroed, made tiny or huge or replaced by another parameter's name (``m1: m2``);
 mappings reordered; initial values and rates changed; optional keys dropped or list items duplicated; expressions
 perturbed (``+ 0``, ``*1``, one parameter swapped for another); joint axes changed; names renamed consistently.
-So most mutants are still valid models, and `info`/`derive`, `simulate` and `equilibria`/`modes`/`collide` run
-on them as subprocesses (``python -m mechsys``), with random options (``--set``, ``--rtol``, ``--dt``,
+So most mutants are still valid models, and `info`/`derive`/`codegen`, `simulate` and `equilibria`/`modes`/`collide`
+run on them as subprocesses (``python -m mechsys``), with random options (``--set``, ``--rtol``, ``--dt``,
 ``--method``; sometimes nan, -1, 0), each in a private MECHSYS_CACHE folder: COLD (empty cache), then WARM (same
 cache, same command), and for `simulate` also with ``MECHSYS_CACHE=off``.
 
 Every run must end in exactly one of: exit 0; exit 2 or 1 with one non-empty line on stderr that says why. Never
 "internal error", a traceback, a signal or a hang; and the warm (and uncached) result must equal the cold one
-(`simulate -o` result files numerically, rtol 1e-9/atol 1e-12; the JSON output of the other commands).
+(`simulate -o` result files numerically, rtol 1e-9/atol 1e-12; the package `codegen` writes byte for byte; the
+JSON output of the other commands).
 
 Seeds: fixed by default (reproducible); MECHSYS_FUZZ_SEED=N reproduces a seed; with CI=true or
 MECHSYS_FUZZ_ROTATE=1 every run draws a new seed from the clock, printed in the failure message.
