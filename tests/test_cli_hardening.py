@@ -350,3 +350,24 @@ def test_library_warnings_do_not_reach_the_terminal(tmp_path):
     env["PYTHONPATH"] = str(ROOT)
     proc = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=60)
     assert proc.returncode == 0 and proc.stderr == "", proc.stderr
+
+
+def test_overflowing_linearizations_are_reasoned_not_internal_errors(tmp_path):
+    """A slider-crank whose rod is 1e200 long (found by the CLI fuzz, seed 20261126161154): its mass matrix
+    overflows. codegen's regularity check evaluated the generated code with Python's raising float arithmetic
+    (OverflowError, an internal error); the stability of an equilibrium ran an SVD on infinities (LinAlgError).
+    Now codegen and modes refuse with one line, and equilibria reports the equilibrium undecided, saying why."""
+    text = (ROOT / "tests" / "data" / "crank_past_its_limit.yaml").read_text()
+    text = text.replace("b: 0.16", "b: 1.0e+200").replace("{initial: -asin(a*sin(th0)/b), rate: 0}",
+                                                           "{initial: 0.1, rate: 0}")
+    model = tmp_path / "crank.yaml"
+    model.write_text(text)
+    assert "1.0e+200" in model.read_text() and "initial: 0.1" in model.read_text()
+    line = one_line(invoke("codegen", model, "-t", "c", "-m", "kane", "-o", tmp_path / "package", "--set", "m=0"), 1)
+    assert "singular" in line
+    for extra in ([], ["--set", "m=0"]):
+        assert "not finite" in one_line(invoke("modes", model, *extra), 1)
+    result = invoke("equilibria", model, "--set", "m=0", "-f", "json")
+    assert result.exit_code == 0, result.output
+    verdicts = {(e["stability"], e["reason"].split(" (")[0]) for e in json.loads(result.stdout)["equilibria"]}
+    assert ("undecided", "the linearized equations are not finite here") in verdicts

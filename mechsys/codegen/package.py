@@ -13,6 +13,7 @@ from mechsys.codegen.names import MODULES, mangle
 from mechsys.errors import AnalysisError, InputError
 from mechsys.mechanics.products import product
 from mechsys.numeric.lambdify import ForwardProgram, compile_program, differentiate_program, shared_program
+from mechsys.numeric.runtime import call_generated
 
 if TYPE_CHECKING:
     from mechsys.mechanics.model import MechanicalModel
@@ -331,7 +332,7 @@ def _check_regular(model: "MechanicalModel", shared: "ForwardProgram", n: int, m
     values = (0.0, *[model.doc.initial[c] for c in model.coordinates],
               *[model.doc.initial_rate[c] for c in model.coordinates],
               *[model.parameters[s.name] for s in model.parameter_symbols])
-    out = np.asarray(compile_program(shared)(*values), dtype=float)
+    out = np.asarray(call_generated(compile_program(shared), values, len(shared.outputs)), dtype=float)
     M = K = out[:n * n].reshape(n, n)
     if m:
         A = out[n * n + n:n * n + n + m * n].reshape(m, n)

@@ -163,6 +163,9 @@ def vibration_modes(model: MechanicalModel, at: dict[str, float] | None = None, 
     lin = linearize(model, e)
     red, condensed = reduce(model, lin)
     Ks = (red.K + red.K.T) / 2
+    if not all(np.all(np.isfinite(X)) for X in (red.M, red.C, red.K)):
+        raise AnalysisError("the linearized equations are not finite at the equilibrium (an overflow or a division "
+                            "by zero: check the parameter values, e.g. a length of 1e200 squared)")
     try:
         w2, phi = sla.eigh(Ks, red.M)
     except (np.linalg.LinAlgError, ValueError):

@@ -126,6 +126,12 @@ def assess(problem, e, p: np.ndarray) -> None:
         return problem.assess(e, p)
     problem.current_parameters = p
     A, B, _N = reduced_pencil(problem, e)
+    if not (np.all(np.isfinite(A)) and np.all(np.isfinite(B))):
+        e.eigenvalues, e.jacobian, e.critical = np.zeros(0, complex), None, False
+        e.stability = "undecided"
+        e.reason = ("the linearized equations are not finite here (an overflow or a division by zero: check the "
+                    "parameter values, e.g. a length of 1e200 squared), so no verdict is read from them")
+        return
     if singular_pencil(A, B):
         names = massless_coordinates(problem, e)
         who = (f"{', '.join(names)} carr{'ies' if len(names) == 1 else 'y'} no mass or inertia" if names
