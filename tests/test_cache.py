@@ -40,3 +40,17 @@ def test_damaged_cache_entry_is_ignored(tmp_path, monkeypatch):
     model = mechsys.load(MODEL)
     assert compile_model(model).cache_hit is False
     assert simulate(model, 0.5, 0.1).q.shape == (6, 2)
+
+
+def test_an_entry_too_large_to_read_back_is_not_written(tmp_path, monkeypatch):
+    """read_private refuses files over MAX_ENTRY_BYTES, so store does not write them (the 40-link chain's Lagrange
+    JSON, 985 MB, was signed and written and never read); an entry at the limit is written and read back."""
+    from mechsys.numeric import cache
+
+    monkeypatch.setenv("MECHSYS_CACHE", str(tmp_path))
+    monkeypatch.setattr(cache, "MAX_ENTRY_BYTES", 4096)
+    fits = {"text": "x" * (4096 - len(cache._MAGIC) - 65 - len('{"text": ""}'))}
+    cache.store("fits", fits)
+    assert cache.load("fits") == fits and (tmp_path / "fits.json").stat().st_size == 4096
+    cache.store("big", {"text": "x" * 5000})
+    assert cache.load("big") is None and not (tmp_path / "big.json").exists()

@@ -214,6 +214,10 @@ def store(key: str, payload: dict) -> None:
     if folder is None:
         return
     body = json.dumps(payload).encode()
+    # an entry larger than MAX_ENTRY_BYTES is never read back: not signed and written for nothing (the 40-link
+    # chain's Lagrange equations printed as JSON: 985 MB)
+    if len(_MAGIC) + 65 + len(body) > MAX_ENTRY_BYTES:  # 65: the hex signature and its newline
+        return
     try:
         _write_atomic(folder, f"{key}.json", _MAGIC + sign(body).encode() + b"\n" + body)
     except OSError:
