@@ -276,16 +276,17 @@ def derive_package(model: "MechanicalModel", method: str = "lagrange") -> Packag
                             [model.t, *model.q, *model.u, *model.parameter_symbols], wrt)
     _check_regular(model, shared, n, m)
     named = ForwardProgram(shared.args, list(shared.values), [], dict(shared.symbols), [], [])
+    as_named = []  # each output of the CSE, or its temporary in ``named``
     for k, e in enumerate(shared.outputs):
         if not e.is_Atom:
             named.symbols[f"o{k}"] = sym = sp.Dummy(f"o{k}", real=True)
             named.values.append((f"o{k}", e))
             e = sym
-        named.outputs.append(e)
+        as_named.append(e)
     parts, entries, start = [], [], 0
     for block in blocks:
         parts.append(shared.outputs[start:start + len(block)])
-        entries.append(named.outputs[start:start + len(block)])
+        entries.append(as_named[start:start + len(block)])
         start += len(block)
     add("mass_matrix", STATE_ARGS, (n, n), Program.part(shared, parts[0]), "mass matrix M")
     add("forcing", STATE_ARGS, (n,), Program.part(shared, parts[1]), "forcing f (M q'' = f + A^T lam)")

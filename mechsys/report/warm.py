@@ -1,16 +1,16 @@
-"""Warm outputs of `derive`, `info`, `equilibria`, `modes` and `codegen`: kept by the file's bytes and the options, so a
-repeated command prints without sympy (no import, no model build: a second `derive` of the bicycle in a third of
-a second).
+"""Warm outputs of `derive`, `info`, `equilibria`, `modes` and `codegen`: kept by the file's bytes and the options,
+so a repeated command prints (or writes) without sympy (no import, no model build: a second `derive` of the
+bicycle in a third of a second).
 
-What is kept is data: derive's printed text, the files of a generated package (text; not an FMU, which gcc
-builds), info's facts (analysis/facts.py `Info`, rendered again in the format
-asked), the tables and JSON payload of `equilibria` and `modes` (rendered again, so a text table fits the
-terminal). The key is the file's bytes, the command, every option that shapes the output (the `--set`
-assignments in their order), mechsys's version, the source of the whole package and the versions of sympy, numpy
-and scipy (a printer or a rank decision may change with them), and for the numeric commands the C compiler used
-(none, or MECHSYS_NATIVE=off: the Python path, whose last digits may differ). Entries are signed like every cache
-entry (numeric/cache.py) and checked for their shape. Commands that fail, that verify or draw (`derive --check`,
-`equilibria --verify`, `--plot`) and runs with the cache off are never stored or read. Imports nothing heavy."""
+What is kept is data: derive's printed text, the files of a generated package (text; not an FMU, which gcc builds),
+info's facts (analysis/facts.py `Info`, rendered again in the format asked), the tables and JSON payload of
+`equilibria` and `modes` (rendered again, so a text table fits the terminal). The key is the file's bytes, the
+command, every option that shapes the output (the `--set` assignments in their order), mechsys's version, the source
+of the whole package and the versions of sympy, numpy and scipy (a printer or a rank decision may change with them),
+and for the numeric commands the C compiler used (none, or MECHSYS_NATIVE=off: the Python path, whose last digits
+may differ). Entries are signed like every cache entry (numeric/cache.py) and checked for their shape. Commands that
+fail, that verify or draw (`derive --check`, `equilibria --verify`, `--plot`) and runs with the cache off are never
+stored or read. Imports nothing heavy."""
 from __future__ import annotations
 
 import hashlib
@@ -78,7 +78,7 @@ def load_files(key: str | None) -> dict[str, str] | None:
     entry = cache.load(key) if key is not None else None
     files = entry.get("files") if entry is not None else None
     if not isinstance(files, dict) or not files or not all(
-            isinstance(k, str) and isinstance(v, str) and k and "/" not in k and k not in (".", "..")
+            isinstance(k, str) and isinstance(v, str) and k and "/" not in k and "\0" not in k and k not in (".", "..")
             for k, v in files.items()):
         return None
     return files
