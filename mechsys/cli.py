@@ -37,6 +37,12 @@ class DeriveFormat(str, Enum):
     json = "json"
 
 
+class Subexpressions(str, Enum):
+    auto = "auto"
+    inline = "inline"
+    named = "named"
+
+
 class InfoFormat(str, Enum):
     text = "text"
     markdown = "markdown"
@@ -199,6 +205,11 @@ def derive(
     raw: bool = typer.Option(False, "--raw", help="Print the expressions as derived, without the quick clean-up "
                                                  "(trigonometric identities, signs) of text, LaTeX and Markdown."),
     fmt: DeriveFormat = typer.Option(DeriveFormat.text, "--format", "-f", help="Output format."),
+    subexpressions: Subexpressions = typer.Option(
+        Subexpressions.auto, "--subexpressions",
+        help="named: print each subexpression that several entries share once, as z1, z2, ... defined at the end; "
+             "inline: write every entry out in full; auto: named when the inline form would be large (text, "
+             "LaTeX, Markdown; JSON stays inline)."),
     set_: Optional[List[str]] = SetOption,
     output: Optional[Path] = OutputOption,
 ) -> None:
@@ -210,7 +221,8 @@ def derive(
         check_outputs(output)
         key = None if check else warm.output_key("derive", file, {"set": list(set_ or []), "method": method.value,
                                                                   "format": fmt.value, "raw": raw,
-                                                                  "simplify": simplify})
+                                                                  "simplify": simplify,
+                                                                  "subexpressions": subexpressions.value})
         text = warm.load_text(key)
         if text is not None:
             emit(text, output)
@@ -230,7 +242,8 @@ def derive(
                               "max_relative_difference": result.max_rel_diff, "symbolic": result.symbolic}
         if simplify:
             eq = simplified(eq)
-        text = render(eq, model.name, fmt.value, extra, raw=raw, model=None if simplify else model)
+        text = render(eq, model.name, fmt.value, extra, raw=raw, model=None if simplify else model,
+                      subexpressions=subexpressions.value)
         if verdict is not None and fmt.value != "json":
             prefix = "% " if fmt.value == "latex" else ""
             text += f"{prefix}check: {verdict.summary()}\n"

@@ -27,7 +27,8 @@ STDOUT = "stdout"
 # folder); "{tmp}/" is the scratch folder. Together a section's runs must print every documented key.
 RUNS: dict[str, list[tuple[tuple[str, ...], str]]] = {
     "derive": [(("derive", f"{SYSTEMS}/centrifuge.yaml", "-f", "json"), STDOUT),
-               (("derive", f"{SYSTEMS}/slider_crank.yaml", "--check", "-f", "json"), STDOUT)],
+               (("derive", f"{SYSTEMS}/slider_crank.yaml", "--check", "-f", "json"), STDOUT),
+               (("derive", f"{SYSTEMS}/four_bar.yaml", "--subexpressions", "named", "-f", "json"), STDOUT)],
     "info": [(("info", f"{SYSTEMS}/centrifuge.yaml", "-f", "json"), STDOUT),
              (("info", f"{SYSTEMS}/slider_crank.yaml", "-f", "json"), STDOUT)],
     "equilibria": [(("equilibria", f"{SYSTEMS}/centrifuge.yaml", "-f", "json"), STDOUT),

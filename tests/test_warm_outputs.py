@@ -82,19 +82,21 @@ def _options(args: list) -> dict:
         return {"set": []}
     method = args[args.index("-m") + 1] if "-m" in args else "lagrange"
     fmt = args[args.index("-f") + 1] if "-f" in args else "text"
-    return {"set": [], "method": method, "format": fmt, "raw": False, "simplify": False}
+    return {"set": [], "method": method, "format": fmt, "raw": False, "simplify": False, "subexpressions": "auto"}
 
 
 def test_the_key_follows_the_file_the_options_and_the_code(tmp_path, monkeypatch):
     monkeypatch.setenv("MECHSYS_CACHE", str(tmp_path / "cache"))
     model = tmp_path / "m.yaml"
     shutil.copy(SYSTEMS_DIR / "double_pendulum.yaml", model)
-    base = {"set": [], "method": "lagrange", "format": "text", "raw": False, "simplify": False}
+    base = {"set": [], "method": "lagrange", "format": "text", "raw": False, "simplify": False,
+            "subexpressions": "auto"}
     key = warm.output_key("derive", model, base)
     assert key == warm.output_key("derive", model, dict(base))
     others = [warm.output_key("info", model, base)]
     others += [warm.output_key("derive", model, {**base, k: v}) for k, v in
-               [("set", ["m1=2"]), ("method", "kane"), ("format", "json"), ("raw", True), ("simplify", True)]]
+               [("set", ["m1=2"]), ("method", "kane"), ("format", "json"), ("raw", True), ("simplify", True),
+                ("subexpressions", "named"), ("subexpressions", "inline")]]
     others.append(warm.output_key("derive", model, {**base, "set": ["a=1", "b=2"]}))
     others.append(warm.output_key("derive", model, {**base, "set": ["b=2", "a=1"]}))
     model.write_text(model.read_text() + "\n# a comment changes the bytes\n")

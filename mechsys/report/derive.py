@@ -2,15 +2,20 @@
 from __future__ import annotations
 
 import json
+import re
 from typing import Callable
 
 import sympy as sp
 
 from mechsys.mechanics.model import Equations
-from mechsys.report.printing import shared_subexpressions, to_latex, to_text
+from mechsys.report.printing import (AUTO_NODES, SubexpressionNames, collecting, definition_latex, definition_text,
+                                     naming, shared_subexpressions, to_latex, to_text)
 from mechsys.report.readable import readable, stored_readable
 
 FORMATS = ("text", "markdown", "latex", "json")
+SUBEXPRESSIONS = ("auto", "inline", "named")
+_NAME = re.compile(r"\w+(_\{\w+\})?")  # the text of a name (z12, or z_{12} in LaTeX)
+Where = list[tuple[str, str]]  # (name, text) of each named subexpression, in the format's own notation
 
 
 def simplified(eq: Equations) -> Equations:
@@ -24,6 +29,11 @@ def _paren(text: str, times: str) -> str:
     return f"({text})" if times != " " else f"\\left({text}\\right)"
 
 
+def _bracketed(coeff: sp.Expr, text: str, times: str) -> str:
+    """A coefficient's text, in brackets when it is a sum written out (a named subexpression needs none)."""
+    return _paren(text, times) if coeff.is_Add and not _NAME.fullmatch(text) else text
+
+
 def _lhs(eq: Equations, i: int, fmt: Callable[[sp.Expr], str], times: str, acc: Callable[[int], str],
          tidy: bool = False) -> str:
     if tidy:
@@ -34,9 +44,7 @@ def _lhs(eq: Equations, i: int, fmt: Callable[[sp.Expr], str], times: str, acc: 
         mij = eq.M[i, j]
         if mij == 0:
             continue
-        coeff = fmt(mij)
-        if mij.is_Add:
-            coeff = _paren(coeff, times)
+        coeff = _bracketed(mij, fmt(mij), times)
         terms.append(acc(j) if mij == 1 else f"{coeff}{times}{acc(j)}")
     return " + ".join(terms) if terms else "0"
 
@@ -55,7 +63,7 @@ def _pieces(terms: list[tuple[sp.Expr, str]], fmt: Callable[[sp.Expr], str], tim
     for coeff, symbol in terms:
         minus = _negative(coeff)
         c = -coeff if minus else coeff
-        text = _paren(fmt(c), times) if c.is_Add else fmt(c)
+        text = _bracketed(c, fmt(c), times)
         body = symbol if c == 1 else (f"{symbol}{times}{text}" if symbol_first else f"{text}{times}{symbol}")
         out.append((minus, body))
     return out
@@ -86,6 +94,14 @@ def _multiplier_terms(eq: Equations, i: int, fmt: Callable[[sp.Expr], str], lam:
     return out
 
 
+def _rhs(f: sp.Expr, fmt: Callable[[sp.Expr], str], multipliers: str) -> str:
+    """f + the multiplier terms (' + lambda1*(...)...'); a zero f is left out when multipliers follow."""
+    if f != 0 or not multipliers:
+        return fmt(f) + multipliers
+    sign, rest = multipliers[1], multipliers[3:]
+    return rest if sign == "+" else f"-{rest}"
+
+
 def _text_constraint_row(eq: Equations, k: int, tidy: bool) -> str:
     acc = [f"der(der({c}))" for c in eq.coordinates]
     if tidy:
@@ -93,7 +109,7 @@ def _text_constraint_row(eq: Equations, k: int, tidy: bool) -> str:
     return " + ".join(f"({to_text(a)})*{acc[j]}" for j, a in enumerate(eq.A.row(k)) if a != 0) or "0"
 
 
-def render_text(eq: Equations, name: str, tidy: bool = False) -> str:
+def render_text(eq: Equations, name: str, tidy: bool = False, where: Where = ()) -> str:
     """The text form; tidy: signs joined as 'a - b' (never 'a + -b'), unit coefficients left out."""
     lines = [f"{name}: equations of motion ({eq.method}), M q'' = f" + (" + A^T lambda" if eq.A.shape[0] else "")]
     lines.append("coordinates: " + (", ".join(eq.coordinates) or "(none)"))
@@ -106,11 +122,14 @@ def render_text(eq: Equations, name: str, tidy: bool = False) -> str:
     for i, c in enumerate(eq.coordinates):
         lhs = _lhs(eq, i, to_text, "*", lambda j: f"der(der({eq.coordinates[j]}))", tidy)
         lam = _multiplier_terms(eq, i, to_text, lambda k: f"lambda{k + 1}", "*", tidy)
-        lines.append(f"  {c}: {lhs} = {to_text(eq.f[i])}{lam}")
+        lines.append(f"  {c}: {lhs} = {_rhs(eq.f[i], to_text, lam)}")
     if eq.A.shape[0]:
         lines.append("constraints (acceleration level, A q'' = b):")
         for k, cname in enumerate(eq.constraint_names):
             lines.append(f"  lambda{k + 1} [{cname}]: {_text_constraint_row(eq, k, tidy)} = {to_text(eq.b[k])}")
+    if where:
+        lines.append("where (subexpressions that several entries share, each printed once):")
+        lines += [f"  {z} = {text}" for z, text in where]
     return "\n".join(lines) + "\n"
 
 
@@ -130,7 +149,7 @@ def latex_equations(eq: Equations, tidy: bool = False) -> list[tuple[str, str]]:
     for i, c in enumerate(eq.coordinates):
         lhs = _lhs(eq, i, to_latex, " ", lambda j: acc[j], tidy)
         lam = _multiplier_terms(eq, i, to_latex, lambda k: f"\\lambda_{{{k + 1}}}", " ", tidy)
-        rows.append((c, f"{lhs} &= {to_latex(eq.f[i])}{lam}"))
+        rows.append((c, f"{lhs} &= {_rhs(eq.f[i], to_latex, lam)}"))
     for k in range(eq.A.shape[0]):
         if tidy:
             row = _leading(_pieces([(a, acc[j]) for j, a in enumerate(eq.A.row(k)) if a != 0], to_latex, " "))
@@ -140,20 +159,27 @@ def latex_equations(eq: Equations, tidy: bool = False) -> list[tuple[str, str]]:
     return rows
 
 
-def render_latex(eq: Equations, name: str, tidy: bool = False) -> str:
+def render_latex(eq: Equations, name: str, tidy: bool = False, where: Where = ()) -> str:
     body = " \\\\\n".join(line for _, line in _latex_lines(eq, tidy))
+    if where:
+        body += " \\\\\n\\intertext{where}\n" + " \\\\\n".join(f"{z} &= {text}" for z, text in where)
     return f"% {name}: equations of motion ({eq.method})\n\\begin{{align*}}\n{body}\n\\end{{align*}}\n"
 
 
-def render_markdown(eq: Equations, name: str, tidy: bool = False) -> str:
+def render_markdown(eq: Equations, name: str, tidy: bool = False, where: Where = ()) -> str:
     out = [f"# {name}: equations of motion ({eq.method})", "",
            "Coordinates: " + (", ".join(f"`{c}`" for c in eq.coordinates) or "none"), ""]
     for label, line in _latex_lines(eq, tidy):
         out += [f"**{label}**", "", "$$", line.replace("&=", "="), "$$", ""]
+    if where:
+        out += ["**where** (subexpressions that several entries share, each printed once)", ""]
+        for z, text in where:
+            out += ["$$", f"{z} = {text}", "$$", ""]
     return "\n".join(out)
 
 
-def to_json_dict(eq: Equations, name: str) -> dict:
+def to_json_dict(eq: Equations, name: str, where: Where = ()) -> dict:
+    """The equations as JSON data; with ``where``, the entries use the names of its "subexpressions"."""
     data = {
         "name": name,
         "method": eq.method,
@@ -170,29 +196,53 @@ def to_json_dict(eq: Equations, name: str) -> dict:
             "jacobian": [[to_text(eq.A[k, j]) for j in range(eq.A.shape[1])] for k in range(eq.A.shape[0])],
             "rhs": [to_text(x) for x in eq.b],
         }
+    if where:
+        data["subexpressions"] = dict(where)
     return data
 
 
-def render(eq: Equations, name: str, fmt: str, extra: dict | None = None, raw: bool = False, model=None) -> str:
+def render(eq: Equations, name: str, fmt: str, extra: dict | None = None, raw: bool = False, model=None,
+           subexpressions: str = "auto") -> str:
     """The equations in a format. Text, Markdown and LaTeX print the readable form (report/readable.py: exact
     clean-up within a time budget, a one-line note when it runs out) unless raw; JSON is always as derived.
     ``model``: the model whose own derived equations ``eq`` are (not simplified), so the clean-up is read from
-    and kept in the derivation cache. Subexpressions shared by the entries are printed once (report/printing.py)."""
+    and kept in the derivation cache. ``subexpressions``: "named" prints the subexpressions that several
+    entries share once, as z1, z2, ... defined at the end (report/printing.py SubexpressionNames); "inline"
+    writes every entry out; "auto" names them when the inline form would have more than AUTO_NODES nodes
+    (text, Markdown, LaTeX; JSON stays inline unless "named" is asked for)."""
+    if subexpressions not in SUBEXPRESSIONS:
+        raise ValueError(f"unknown subexpressions {subexpressions!r}; use one of {SUBEXPRESSIONS}")
+    note = None
+    if fmt != "json" and not raw:
+        cleanup = readable(eq) if model is None else stored_readable(model, eq)
+        eq, note = cleanup.equations, cleanup.note()
     with shared_subexpressions():
-        return _render(eq, name, fmt, extra, raw, model)
-
-
-def _render(eq: Equations, name: str, fmt: str, extra: dict | None, raw: bool, model) -> str:
-    if fmt == "json":
-        data = to_json_dict(eq, name)
-        data.update(extra or {})
-        return json.dumps(data, indent=2) + "\n"
-    renderer = {"text": render_text, "markdown": render_markdown, "latex": render_latex}[fmt]
-    if raw:
-        return renderer(eq, name)
-    cleanup = readable(eq) if model is None else stored_readable(model, eq)
-    text = renderer(cleanup.equations, name, tidy=True)
-    note = cleanup.note()
+        write = _writer(eq, name, fmt, extra, tidy=fmt != "json" and not raw)
+        if subexpressions == "inline" or (subexpressions == "auto" and fmt == "json"):
+            text = write(())
+        else:
+            with collecting() as printed:
+                write(())
+            names = SubexpressionNames(printed)
+            if subexpressions == "auto" and names.inline_nodes <= AUTO_NODES:
+                text = write(())
+            else:
+                with naming(names):
+                    defined = definition_latex if fmt in ("latex", "markdown") else definition_text
+                    label = to_latex if fmt in ("latex", "markdown") else to_text
+                    text = write([(label(sp.Symbol(names.names[z])), defined(z)) for z in names.definitions])
     if note:
         text += {"text": f"{note}\n", "markdown": f"\n{note}\n", "latex": f"% {note}\n"}[fmt]
     return text
+
+
+def _writer(eq: Equations, name: str, fmt: str, extra: dict | None, tidy: bool) -> Callable[[Where], str]:
+    """The function that writes the equations in a format, given the named subexpressions' definitions."""
+    if fmt == "json":
+        def write(where: Where) -> str:
+            data = to_json_dict(eq, name, where)
+            data.update(extra or {})
+            return json.dumps(data, indent=2) + "\n"
+        return write
+    renderer = {"text": render_text, "markdown": render_markdown, "latex": render_latex}[fmt]
+    return lambda where: renderer(eq, name, tidy, where)

@@ -9,6 +9,8 @@ from sympy.printing.latex import LatexPrinter
 from sympy.printing.str import StrPrinter
 
 _SHARING = [0]  # depth of shared_subexpressions() blocks
+_NAMING: list["SubexpressionNames | None"] = [None]  # the names in force (naming() block), else None
+_COLLECTING: list["list[sp.Basic] | None"] = [None]  # the expressions a collecting() block was asked to print
 
 
 class _PrintsEachNodeOnce:
@@ -22,9 +24,16 @@ class _PrintsEachNodeOnce:
         super().__init__(settings)
         self._memo: dict[int, tuple[sp.Basic, str]] = {}
 
+    _defining = None  # the named subexpression whose definition is being printed (its own name not used)
+
     def _print(self, expr, **kwargs) -> str:
         if kwargs or not isinstance(expr, sp.Basic) or not expr.args:
             return super()._print(expr, **kwargs)
+        naming = _NAMING[0]
+        if naming is not None and expr is not self._defining:
+            name = naming.names.get(expr)
+            if name is not None:
+                return self._name(name)
         hit = self._memo.get(id(expr))
         if hit is not None and hit[0] is expr:
             return hit[1]
@@ -39,6 +48,28 @@ class _PrintsEachNodeOnce:
             if not _SHARING[0]:
                 self._memo.clear()
 
+    def _name(self, name: str) -> str:
+        return name
+
+    def definition(self, expr: sp.Basic) -> str:
+        """The text of a named subexpression itself (the names of the subexpressions inside it used)."""
+        self._defining = expr
+        try:
+            return self.doprint(expr)
+        finally:
+            self._defining = None
+
+    def parenthesize(self, item, level, *args, **kwargs) -> str:
+        if _named(item):
+            return self._print(item)
+        return super().parenthesize(item, level, *args, **kwargs)
+
+
+def _named(expr) -> bool:
+    """Whether the expression prints as a name in the naming() block in force (then it needs no brackets)."""
+    naming = _NAMING[0]
+    return naming is not None and isinstance(expr, sp.Basic) and expr in naming.names
+
 
 @contextmanager
 def shared_subexpressions() -> Iterator[None]:
@@ -52,6 +83,100 @@ def shared_subexpressions() -> Iterator[None]:
         if not _SHARING[0]:
             _PRINTER._memo.clear()
             _LATEX._memo.clear()
+
+
+MIN_LENGTH = 24  # characters: a shared subexpression shorter than this is written out where it is used
+AUTO_NODES = 10_000  # `auto` names the shared subexpressions when the inline form has more nodes than this
+
+
+class SubexpressionNames:
+    """Names z1, z2, ... for the subexpressions that the printed expressions share: equations derived for a
+    3-D model or a long chain are DAGs whose inline text repeats the same subtrees (the 20-link chain's Kane
+    equations: 7,600 distinct nodes, 7 MB of text; the bicycle's: 690 kB). A subexpression is named when it is
+    used more than once (counted as sympy's tree_cse counts: by value, inside a repeated subexpression only once)
+    and its text, with the names of its own shared parts, is at least MIN_LENGTH characters. The prefix is
+    chosen so that no name of the model reads like a subexpression's name. ``definitions`` lists the named
+    subexpressions in dependency order (each uses only names defined before it)."""
+
+    def __init__(self, exprs: list[sp.Basic], min_length: int = MIN_LENGTH) -> None:
+        self._counts, self._order, taken, self.inline_nodes = _census(exprs)
+        self.min_length = min_length
+        self.prefix = "z"
+        while any(t.startswith(self.prefix) and t[len(self.prefix):].isdigit() for t in taken):
+            self.prefix += "z"
+        self.names: dict[sp.Basic, str] = {}
+        self.definitions: list[sp.Basic] = []
+
+    def _choose(self) -> None:
+        """Name the shared subexpressions, inner ones first (in force: each text uses the names chosen so far)."""
+        for node in self._order:
+            if self._counts[node] > 1 and len(_PRINTER._print(node)) >= self.min_length:
+                self.definitions.append(node)
+                self.names[node] = f"{self.prefix}{len(self.definitions)}"
+        self._counts = self._order = None
+
+
+def _census(exprs: list[sp.Basic]) -> tuple[dict, list, set[str], int]:
+    """(uses of each compound subexpression by value, the compound ones in post-order, the symbol names, the
+    number of nodes of the inline form). Iterative: the trees of long chains are deeper than Python's stack."""
+    counts: dict[sp.Basic, int] = {}
+    sizes: dict[sp.Basic, int] = {}
+    order: list[sp.Basic] = []
+    taken: set[str] = set()
+    roots = [sp.sympify(r) for r in exprs]
+    for root in roots:
+        stack: list[tuple[sp.Basic, bool]] = [(root, False)]
+        while stack:
+            node, done = stack.pop()
+            if done:
+                order.append(node)
+                sizes[node] = 1 + sum(sizes.get(a, 1) for a in node.args)
+            elif not node.args:
+                if node.is_Symbol:
+                    taken.add(node.name)
+            elif node in counts:
+                counts[node] += 1
+            else:
+                counts[node] = 1
+                stack.append((node, True))
+                stack.extend((a, False) for a in reversed(node.args))
+    return counts, order, taken, sum(sizes.get(r, 1) for r in roots)
+
+
+@contextmanager
+def _block(naming: "SubexpressionNames | None") -> Iterator[None]:
+    previous = _NAMING[0]
+    _NAMING[0] = naming
+    _PRINTER._memo.clear()
+    _LATEX._memo.clear()
+    try:
+        with shared_subexpressions():
+            yield
+    finally:
+        _NAMING[0] = previous
+        _PRINTER._memo.clear()
+        _LATEX._memo.clear()
+
+
+@contextmanager
+def naming(names: SubexpressionNames) -> Iterator[SubexpressionNames]:
+    """Within the block, to_text and to_latex print the named subexpressions by name (chosen on entry)."""
+    with _block(names):
+        if names._counts is not None:
+            names._choose()
+        yield names
+
+
+@contextmanager
+def collecting() -> Iterator[list[sp.Basic]]:
+    """Within the block, to_text and to_latex only record their expressions (and return a placeholder): a dry
+    run of a renderer lists exactly what it prints, the input of SubexpressionNames."""
+    previous = _COLLECTING[0]
+    _COLLECTING[0] = seen = []
+    try:
+        yield seen
+    finally:
+        _COLLECTING[0] = previous
 
 
 class YamlExprPrinter(_PrintsEachNodeOnce, StrPrinter):
@@ -80,6 +205,21 @@ class _DottedLatexPrinter(_PrintsEachNodeOnce, LatexPrinter):
         dotted = _dotted(expr.name)
         return dotted if dotted is not None else super()._print_Symbol(expr, style)
 
+    def _name(self, name: str) -> str:
+        return _latex_name(name)
+
+    def _needs_brackets(self, expr) -> bool:
+        return not _named(expr) and super()._needs_brackets(expr)
+
+    def _needs_function_brackets(self, expr) -> bool:
+        return not _named(expr) and super()._needs_function_brackets(expr)
+
+    def _needs_mul_brackets(self, expr, first: bool = False, last: bool = False) -> bool:
+        return not _named(expr) and super()._needs_mul_brackets(expr, first, last)
+
+    def _needs_add_brackets(self, expr) -> bool:
+        return not _named(expr) and super()._needs_add_brackets(expr)
+
 
 _PRINTER = YamlExprPrinter({"order": "none"})
 _LATEX = _DottedLatexPrinter()
@@ -87,7 +227,20 @@ _LATEX = _DottedLatexPrinter()
 
 def to_text(expr: sp.Expr) -> str:
     """The expression as a string the YAML expression parser reads back to the same value."""
+    if _COLLECTING[0] is not None:
+        _COLLECTING[0].append(sp.sympify(expr))
+        return "x"
     return _PRINTER.doprint(sp.sympify(expr))
+
+
+def definition_text(expr: sp.Basic) -> str:
+    """The text of a named subexpression (naming() block)."""
+    return _PRINTER.definition(expr)
+
+
+def definition_latex(expr: sp.Basic) -> str:
+    """The LaTeX of a named subexpression (naming() block)."""
+    return _LATEX.definition(expr)
 
 
 def _latex_name(name: str) -> str:
@@ -105,4 +258,7 @@ def _dotted(name: str) -> str | None:
 
 def to_latex(expr: sp.Expr) -> str:
     """The expression in LaTeX, rates dotted."""
+    if _COLLECTING[0] is not None:
+        _COLLECTING[0].append(sp.sympify(expr))
+        return "x"
     return _LATEX.doprint(sp.sympify(expr))

@@ -1,0 +1,179 @@
+"""`derive --subexpressions named`: subexpressions that several entries share printed once, as z1, z2, ...
+
+The check is independent of mechsys: the JSON's definitions and entries are read back (the YAML expression parser,
+numbers for every name) and compared with M and f from plain sympy Lagrangians (tests/reference_mechanics.py, and
+a chain of rods whose Lagrangian tests/test_codegen_jacobian.py writes by hand). The text and LaTeX forms carry
+the same definitions; `auto` leaves every textbook system's output as it was and names the bicycle's."""
+from __future__ import annotations
+
+import json
+import re
+
+import numpy as np
+import pytest
+import sympy as sp
+
+import mechsys
+from typer.testing import CliRunner
+
+from helpers import SYSTEMS_DIR
+from mechsys.cli import app
+from mechsys.model.expressions import parse_expression
+from mechsys.report.derive import render
+from mechsys.report.printing import SubexpressionNames, naming, to_latex, to_text
+from test_codegen_jacobian import CHAIN, _chain_reference
+from test_lagrange_reference import _reference
+
+
+def run_cli(*args: str):
+    result = CliRunner().invoke(app, [str(a) for a in args])
+    result.returncode, result.stderr_text = result.exit_code, result.output
+    return result
+
+
+def _numbers(data: dict, model, q: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """M and f of a `derive -f json` output at (q, u), every subexpression evaluated in order from the text."""
+    values = {name: sp.Float(v, 30) for name, v in model.parameters.items()}
+    values.update({c: sp.Float(x, 30) for c, x in zip(data["coordinates"], q)})
+    rates = {c: sp.Float(x, 30) for c, x in zip(data["coordinates"], u)}
+    values["t"] = sp.Float(0)
+    for name, text in data.get("subexpressions", {}).items():
+        assert name not in values, f"{name} is also a name of the model"
+        values[name] = sp.Float(parse_expression(text, values, rates).evalf(30), 30)
+
+    def value(text: str) -> float:
+        return float(parse_expression(text, values, rates).evalf(30))
+
+    M = np.array([[value(e) for e in row] for row in data["mass_matrix"]])
+    f = np.array([value(e) for e in data["forcing"]])
+    return M, f
+
+
+def _case(name: str, tmp_path):
+    if name == "chain":
+        path = tmp_path / "rods.yaml"
+        path.write_text(CHAIN)
+        names, M, f, q, u = _chain_reference()
+    else:
+        path, system = _reference(name)
+        names, M, f, q, u = list(system.names), system.M, system.f, system.q, system.u
+    return path, names, sp.lambdify((*q, *u), M, "numpy"), sp.lambdify((*q, *u), f, "numpy")
+
+
+@pytest.mark.parametrize("method", ["lagrange", "kane"])
+@pytest.mark.parametrize("case", ["chain", "furuta", "zxz"])
+def test_named_json_reads_back_to_the_reference_equations(case, method, tmp_path):
+    path, names, ref_M, ref_f = _case(case, tmp_path)
+    out = run_cli("derive", str(path), "--method", method, "-f", "json", "--subexpressions", "named")
+    assert out.returncode == 0, out.stderr_text
+    data = json.loads(out.stdout)
+    if case == "chain":
+        assert len(data["subexpressions"]) > 5, "nothing shared was named"
+    model = mechsys.load(path)
+    order = [data["coordinates"].index(n) for n in names]  # reference index -> printed index
+    n = len(names)
+    rng = np.random.default_rng(31)
+    for _ in range(3):
+        q, u = rng.uniform(-2, 2, n), rng.uniform(-3, 3, n)
+        M, f = _numbers(data, model, q, u)
+        want_M = np.asarray(ref_M(*q[order], *u[order]), dtype=float)
+        want_f = np.asarray(ref_f(*q[order], *u[order]), dtype=float).ravel()
+        scale = max(1.0, float(np.abs(want_f).max()))
+        np.testing.assert_allclose(M[np.ix_(order, order)], want_M, rtol=1e-12, atol=1e-12)
+        # Lagrange's f is the reference's; Kane's differs by the potential forces' form only, not in value
+        np.testing.assert_allclose(f[order], want_f, rtol=0, atol=1e-11 * scale)
+
+
+def test_named_json_is_the_derived_equations_on_the_bicycle():
+    """The bicycle's inline entries are longer than the expression parser reads (4,000 characters); named, each
+    definition and entry reads back, and their values are the derived M and f."""
+    path = SYSTEMS_DIR / "bicycle.yaml"
+    model = mechsys.load(path)
+    named = json.loads(run_cli("derive", str(path), "--method", "kane", "-f", "json",
+                               "--subexpressions", "named").stdout)
+    assert len(named["subexpressions"]) > 100
+    eq = model.equations("kane")
+    rng = np.random.default_rng(4)
+    q, u = rng.uniform(-1, 1, 9), rng.uniform(-1, 1, 9)
+    point = {s: v for s, v in zip([*eq.q, *eq.u], [*q, *u])}
+    point.update({s: model.parameters[s.name] for s in model.parameter_symbols})
+    point[model.t] = 0.0
+    args = list(point)
+    want_M = np.asarray(sp.lambdify(args, eq.M, cse=True)(*point.values()), dtype=float)
+    want_f = np.asarray(sp.lambdify(args, eq.f, cse=True)(*point.values()), dtype=float).ravel()
+    M, f = _numbers(named, model, q, u)
+    np.testing.assert_allclose(M, want_M, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(f, want_f, rtol=1e-12, atol=1e-12 * max(1.0, np.abs(want_f).max()))
+
+
+@pytest.mark.parametrize("fmt", ["text", "markdown", "latex", "json"])
+@pytest.mark.parametrize("path", sorted(SYSTEMS_DIR.glob("*.yaml")), ids=lambda p: p.stem)
+def test_auto_is_inline_on_the_textbook_systems_and_named_on_the_bicycle(path, fmt):
+    model = mechsys.load(path)
+    eq = model.equations("kane")
+    auto = render(eq, model.name, fmt, subexpressions="auto")
+    named = render(eq, model.name, fmt, subexpressions="named")
+    inline = render(eq, model.name, fmt, subexpressions="inline")
+    if path.stem == "bicycle" and fmt != "json":
+        assert auto == named != inline
+        assert len(auto) < 0.1 * len(inline)
+    else:
+        assert auto == inline
+
+
+def test_the_text_defines_each_name_once_before_no_use_and_uses_every_name(tmp_path):
+    out = run_cli("derive", str(SYSTEMS_DIR / "bicycle.yaml"), "--subexpressions", "named")
+    assert out.returncode == 0, out.stderr_text
+    head, where = out.stdout.split("where (subexpressions that several entries share, each printed once):\n")
+    lines = where.splitlines()
+    defined = [line.split(" = ", 1)[0].strip() for line in lines]
+    assert defined == [f"z{k}" for k in range(1, len(defined) + 1)]
+    for k, line in enumerate(lines):  # a definition uses only names defined before it
+        used = {int(x) for x in re.findall(r"\bz(\d+)\b", line.split(" = ", 1)[1])}
+        assert all(j <= k for j in used), line
+    used_anywhere = {int(x) for x in re.findall(r"\bz(\d+)\b", head + "\n".join(x.split(" = ", 1)[1] for x in lines))}
+    assert used_anywhere == set(range(1, len(defined) + 1))  # no name defined and never used
+
+
+def test_a_subexpression_is_named_when_shared_and_long_enough():
+    x, y, a, b, c = sp.symbols("x y a b c")
+    long = a * sp.cos(x + y) + b * sp.sin(x - y) + c  # 29 characters
+    short = sp.cos(x)
+    names = SubexpressionNames([long * a + short, long ** 2 * short, b])
+    with naming(names):
+        assert names.definitions == [long]
+        assert to_text(long * a + short) == "a*z1 + cos(x)"
+        assert to_text(long ** 2 * short) == "z1**2*cos(x)"
+        assert to_latex(long * b) == "b z_{1}"  # no brackets around a named sum
+        assert to_text(-a * long) == "-a*z1"
+    assert to_text(long * a) == "a*(c + a*cos(x + y) + b*sin(x - y))"  # outside the block: written out
+
+
+def test_the_prefix_avoids_the_models_names():
+    z1, zz2, x = sp.symbols("z1 zz2 x")
+    shared = z1 * sp.cos(x) + zz2 * sp.sin(x) + x ** 3
+    names = SubexpressionNames([shared * x, shared ** 2])
+    assert names.prefix == "zzz"
+    with naming(names):
+        assert to_text(shared ** 2) == "zzz1**2"
+
+
+def test_a_chain_too_deep_for_recursion_is_counted(tmp_path):
+    """The census walks without recursion: a sum nested 5,000 deep (deeper than Python's default stack)."""
+    x = sp.Symbol("x")
+    e = x
+    for k in range(5000):
+        e = sp.Add(sp.Mul(sp.Integer(k + 2), e, evaluate=False), x, evaluate=False)
+    names = SubexpressionNames([e, e])
+    assert names.inline_nodes == 2 * (1 + 4 * 5000)
+
+
+def test_the_kept_output_follows_the_option(tmp_path, monkeypatch):
+    """`derive` keeps its printed output (report/warm.py): the option is part of the key."""
+    monkeypatch.setenv("MECHSYS_CACHE", str(tmp_path / "cache"))
+    path = str(SYSTEMS_DIR / "double_pendulum.yaml")
+    named = run_cli("derive", path, "--subexpressions", "named").stdout
+    inline = run_cli("derive", path, "--subexpressions", "inline").stdout
+    again = run_cli("derive", path, "--subexpressions", "named").stdout
+    assert named == again != inline
+    assert "where (" in named and "where (" not in inline
