@@ -87,3 +87,48 @@ def test_rate_coefficients_of_a_nonlinear_entry_keep_the_secant():
     assert list(got[0, :]) == [a, 0, 0]
     assert list(got[1, :]) == [sp.sin(1), b, 0]
     assert list(got[2, :]) == [0, 0, a]
+
+
+def _models():
+    from helpers import DATA_DIR, SYSTEMS_DIR
+
+    return sorted(SYSTEMS_DIR.glob("*.yaml")) + sorted(DATA_DIR.glob("*.yaml"))
+
+
+@pytest.mark.parametrize("path", _models(), ids=lambda p: p.stem)
+def test_gram_of_every_models_partial_velocities_is_sympys_product(path):
+    """gram's products skip Mul's sorting where that is safe (products._Products): each entry must be the very
+    expression sympy's matrix product builds (== compares args in order), on the partial velocities of every
+    bundled and test-data model."""
+    import mechsys
+    from mechsys.errors import MechsysError
+
+    try:
+        model = mechsys.load(path)
+        pairs = list(zip(model._body_kinematics, model._body_partials))
+    except MechsysError:
+        pytest.skip("not a loadable model")
+    for (body, *_), (Jv, _Jw) in pairs:
+        if body.mass == 0:
+            continue
+        got = gram(Jv, body.mass)
+        want = (body.mass * Jv).T * Jv
+        n = Jv.shape[1]
+        for i in range(n):
+            for j in range(i, n):
+                assert got[i, j] == want[i, j] and got[i, j].args == want[i, j].args, (i, j)
+
+
+def test_gram_of_a_chains_sums_is_sympys_product():
+    """Sums of trigonometric products, as a relative-angle chain's partial velocities: the fast path taken."""
+    qs = sp.symbols("x1:9")
+    l = sp.Symbol("l")
+    rows = []
+    for trig in (sp.cos, sp.sin):
+        rows.append([sp.Add(*(l * trig(sum(qs[:k + 1])) for k in range(i, 8))) for i in range(8)])
+    J = sp.Matrix(rows)
+    got = gram(J, m)
+    want = (m * J).T * J
+    for i in range(8):
+        for j in range(i, 8):
+            assert got[i, j] == want[i, j] and got[i, j].args == want[i, j].args

@@ -52,7 +52,14 @@ def _lhs(eq: Equations, i: int, fmt: Callable[[sp.Expr], str], times: str, acc: 
 def _negative(coeff: sp.Expr) -> bool:
     """Whether the coefficient reads better negated: a leading minus, or (a sum) more negative terms than not."""
     terms = sp.Add.make_args(coeff)
-    return 2 * sum(1 for t in terms if t.as_coeff_Mul()[0].is_negative) > len(terms)
+    return 2 * sum(1 for t in terms if _number(t).is_negative) > len(terms)
+
+
+def _number(term: sp.Expr) -> sp.Expr:
+    """The numeric factor of a term (term.as_coeff_Mul()[0], without building the rest of the product)."""
+    if term.is_Number:
+        return term
+    return term.args[0] if term.is_Mul and term.args[0].is_Number else sp.S.One
 
 
 def _pieces(terms: list[tuple[sp.Expr, str]], fmt: Callable[[sp.Expr], str], times: str,
@@ -216,6 +223,14 @@ def render(eq: Equations, name: str, fmt: str, extra: dict | None = None, raw: b
     if fmt != "json" and not raw:
         cleanup = readable(eq) if model is None else stored_readable(model, eq)
         eq, note = cleanup.equations, cleanup.note()
+    return _named_or_inline(eq, name, fmt, extra, raw, subexpressions) + (_note(note, fmt) if note else "")
+
+
+def _note(note: str, fmt: str) -> str:
+    return {"text": f"{note}\n", "markdown": f"\n{note}\n", "latex": f"% {note}\n"}[fmt]
+
+
+def _named_or_inline(eq: Equations, name: str, fmt: str, extra: dict | None, raw: bool, subexpressions: str) -> str:
     with shared_subexpressions():
         write = _writer(eq, name, fmt, extra, tidy=fmt != "json" and not raw)
         if subexpressions == "inline" or (subexpressions == "auto" and fmt == "json"):
@@ -231,8 +246,6 @@ def render(eq: Equations, name: str, fmt: str, extra: dict | None = None, raw: b
                     defined = definition_latex if fmt in ("latex", "markdown") else definition_text
                     label = to_latex if fmt in ("latex", "markdown") else to_text
                     text = write([(label(sp.Symbol(names.names[z])), defined(z)) for z in names.definitions])
-    if note:
-        text += {"text": f"{note}\n", "markdown": f"\n{note}\n", "latex": f"% {note}\n"}[fmt]
     return text
 
 

@@ -6,6 +6,7 @@ from typing import Iterator
 
 import sympy as sp
 from sympy.printing.latex import LatexPrinter
+from sympy.printing.precedence import precedence
 from sympy.printing.str import StrPrinter
 
 _SHARING = [0]  # depth of shared_subexpressions() blocks
@@ -23,6 +24,7 @@ class _PrintsEachNodeOnce:
     def __init__(self, settings: dict | None = None) -> None:
         super().__init__(settings)
         self._memo: dict[int, tuple[sp.Basic, str]] = {}
+        self._precedences: dict[int, tuple[sp.Basic, int]] = {}
 
     _defining = None  # the named subexpression whose definition is being printed (its own name not used)
 
@@ -46,7 +48,22 @@ class _PrintsEachNodeOnce:
             return super().doprint(expr)
         finally:
             if not _SHARING[0]:
-                self._memo.clear()
+                self.forget()
+
+    def forget(self) -> None:
+        """Drop what is remembered (the texts and precedences of nodes)."""
+        self._memo.clear()
+        self._precedences.clear()
+
+    def _precedence(self, expr) -> int:
+        """sympy's precedence(expr), remembered per node: a product's asks whether its negation is simpler, which
+        builds the negated product (half the time of printing a long chain's equations)."""
+        hit = self._precedences.get(id(expr))
+        if hit is not None and hit[0] is expr:
+            return hit[1]
+        value = precedence(expr)
+        self._precedences[id(expr)] = (expr, value)
+        return value
 
     def _name(self, name: str) -> str:
         return name
@@ -81,8 +98,8 @@ def shared_subexpressions() -> Iterator[None]:
     finally:
         _SHARING[0] -= 1
         if not _SHARING[0]:
-            _PRINTER._memo.clear()
-            _LATEX._memo.clear()
+            _PRINTER.forget()
+            _LATEX.forget()
 
 
 MIN_LENGTH = 24  # characters: a shared subexpression shorter than this is written out where it is used
@@ -147,15 +164,15 @@ def _census(exprs: list[sp.Basic]) -> tuple[dict, list, set[str], int]:
 def _block(naming: "SubexpressionNames | None") -> Iterator[None]:
     previous = _NAMING[0]
     _NAMING[0] = naming
-    _PRINTER._memo.clear()
-    _LATEX._memo.clear()
+    _PRINTER.forget()
+    _LATEX.forget()
     try:
         with shared_subexpressions():
             yield
     finally:
         _NAMING[0] = previous
-        _PRINTER._memo.clear()
-        _LATEX._memo.clear()
+        _PRINTER.forget()
+        _LATEX.forget()
 
 
 @contextmanager
@@ -181,6 +198,13 @@ def collecting() -> Iterator[list[sp.Basic]]:
 
 class YamlExprPrinter(_PrintsEachNodeOnce, StrPrinter):
     """str() with the function names of the YAML language: abs, min, max, exp(1) instead of E."""
+
+    def parenthesize(self, item, level, strict: bool = False) -> str:
+        """StrPrinter.parenthesize (the same text) with the precedence asked once and remembered."""
+        if _named(item):
+            return self._print(item)
+        p = self._precedence(item)
+        return f"({self._print(item)})" if p < level or (not strict and p <= level) else self._print(item)
 
     def _print_Abs(self, expr: sp.Abs) -> str:
         return f"abs({self._print(expr.args[0])})"
