@@ -279,8 +279,8 @@ def rel_diff(a: list[float], b: list[float]) -> float:
 
 
 COMMANDS = {  # label -> mechsys arguments after the file
-    "derive (lagrange)": ["derive", "-f", "json", "-o", "{out}"],
-    "derive --method kane": ["derive", "--method", "kane", "-f", "json", "-o", "{out}"],
+    "derive (lagrange)": ["derive", "-o", "{out}"],  # the default text form, as users run it
+    "derive --method kane": ["derive", "--method", "kane", "-o", "{out}"],
     "info": ["info"],
     "equilibria": ["equilibria"],
     "codegen --method kane": ["codegen", "-t", "python", "--method", "kane", "-o", "{pkg}"],
@@ -317,7 +317,7 @@ def main_commands(ns: list[int], timeout: float, baseline: bool) -> int:
             cells, row = [], {"n": n}
             for label in labels:
                 cache = Path(tmp) / f"cache{n}-{labels.index(label)}"
-                args = [a.format(out=Path(tmp) / "out.json", pkg=Path(tmp) / f"package{n}")
+                args = [a.format(out=Path(tmp) / "out.txt", pkg=Path(tmp) / f"package{n}")
                         for a in [COMMANDS[label][0], str(model), *COMMANDS[label][1:]]]
                 cold, rc = time_command(args, cache, timeout)
                 warm, rc2 = time_command(args, cache, timeout) if cold is not None else (None, None)

@@ -510,6 +510,7 @@ def _analysis_command(rng: random.Random, name: str, sets: list[str]) -> Command
     extra: list[str] = []
     if name == "derive":
         extra = ["-m", rng.choice(["lagrange", "kane"])] + (["--check"] if rng.random() < 0.2 else [])
+        extra += ["--subexpressions", "named"] if rng.random() < 0.3 else []
     elif name == "equilibria" and rng.random() < 0.25:
         extra = [rng.choice(["--linearize", "--hurwitz"])]
     elif name == "modes" and rng.random() < 0.25:

@@ -382,3 +382,21 @@ def test_sum_factors_shared_by_many_products_are_tidied_once(monkeypatch):
     got = [cleaner.clean(e) for e in entries]
     assert calls and len(calls) == len(set(calls))  # no factor tidied twice
     assert got == expected
+
+
+def test_the_readable_form_does_not_change_with_the_process(tmp_path):
+    """Three `derive` processes whose string hashing differs (PYTHONHASHSEED: the order of every set of sympy
+    expressions) print the same bicycle: the unit-vector norms drop the multiplied-out products in the sum's
+    order. Before, they were dropped in a set's order and the printed equations changed from run to run."""
+    import os
+    import subprocess
+    import sys
+
+    outputs = set()
+    for seed in ("1", "2", "3"):
+        env = dict(os.environ, PYTHONHASHSEED=seed, MECHSYS_CACHE=str(tmp_path / f"cache{seed}"))
+        run = subprocess.run([sys.executable, "-m", "mechsys", "derive", str(SYSTEMS_DIR / "bicycle.yaml")],
+                             capture_output=True, text=True, env=env, timeout=300)
+        assert run.returncode == 0, run.stderr
+        outputs.add(run.stdout)
+    assert len(outputs) == 1

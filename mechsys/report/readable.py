@@ -87,8 +87,10 @@ def _no_tick() -> None:
 # ----------------------------------------------------------------------------------------- Pythagoras
 def _factors(term: sp.Expr) -> tuple[sp.Expr, tuple[sp.Expr, ...]]:
     """(numeric coefficient, other factors) of one term of a sum."""
-    coeff, rest = term.as_coeff_Mul()
-    return coeff, (() if rest == 1 else sp.Mul.make_args(rest))
+    if term.is_Mul:  # term.as_coeff_Mul() without building the product of the other factors
+        args = term.args
+        return (args[0], args[1:]) if args[0].is_Number else (sp.S.One, args)
+    return (term, ()) if term.is_Number else (sp.S.One, (term,))
 
 
 def _trig_square(factor: sp.Expr) -> tuple[type, sp.Expr, sp.Expr] | None:
@@ -382,7 +384,7 @@ class _Cleaner:
         best = self._with(add, expanded, chosen)
         if best is None:
             return add
-        for term in list(chosen):
+        for term in candidates:  # in the sum's order: a set's order follows the process's string hashing
             trial = self._with(add, expanded, chosen - {term})
             if trial is not None and self.size(trial) <= self.size(best):
                 chosen, best = chosen - {term}, trial
