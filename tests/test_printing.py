@@ -14,10 +14,15 @@ from mechsys.report.printing import YamlExprPrinter, shared_subexpressions, to_l
 
 
 class _EveryNode(YamlExprPrinter):
-    """The same printer walking every node at every use (sympy's own traversal, nothing remembered)."""
+    """The same printer walking every node at every use (sympy's own traversal, nothing remembered), with
+    sympy's own products, sums and brackets (YamlExprPrinter builds the common product's text directly)."""
 
     def _print(self, expr, **kwargs):
         return StrPrinter._print(self, expr, **kwargs)
+
+    _print_Mul = StrPrinter._print_Mul
+    _print_Add = StrPrinter._print_Add
+    parenthesize = StrPrinter.parenthesize
 
 
 def _sympy_latex(expr: sp.Expr) -> str:
@@ -37,7 +42,7 @@ def _entries(name: str, method: str) -> list[sp.Expr]:
 
 
 @pytest.mark.parametrize("name,method", [("rolling_disk", "kane"), ("gyrostabilizer", "lagrange"),
-                                         ("slider_crank", "lagrange")])
+                                         ("slider_crank", "lagrange"), ("bicycle", "kane"), ("centrifuge", "kane")])
 def test_shared_printing_is_sympys_printing(name, method):
     exprs = _entries(name, method)
     plain = _EveryNode({"order": "none"})
@@ -74,3 +79,22 @@ def test_nothing_is_remembered_after_a_call_or_a_block():
             to_text(expr)
         assert printing._PRINTER._memo  # the outer block still shares
     assert not printing._PRINTER._memo and not printing._LATEX._memo
+
+
+def test_products_print_as_sympy_prints_them():
+    """The products YamlExprPrinter writes itself (a rational coefficient, then symbols, sums, functions and
+    positive powers) and those it leaves to sympy (floats, negative and integer powers, unevaluated products)."""
+    x, y, m, l = sp.symbols("x y m l")
+    rate = sp.Symbol("der(x)")
+    s = x + y
+    exprs = [m * l**2 / 12, -m * l * sp.cos(x) / 2, -x * s, -s * sp.sin(y), 3 * x * s**2, -sp.Rational(7, 3) * rate * s,
+             sp.sqrt(x) * y, -sp.sqrt(2) * x, 2.5 * x * y, -0.5 * s * x, x / y, -x / (2 * y), x * y**-2,
+             sp.Mul(2, 3, x, evaluate=False), sp.Mul(1, x, y, evaluate=False), sp.Mul(-1, s, evaluate=False),
+             sp.Mul(x, sp.Pow(2, 3, evaluate=False), evaluate=False), sp.exp(x) * y, -sp.exp(x) * s / 4,
+             sp.Abs(x) * y, -sp.Max(x, y) * l, x**sp.Rational(3, 2) * y, -(s**2) * sp.cos(s) * l / 7,
+             sp.Mul(-1, x, evaluate=False), sp.Mul(sp.Rational(-1, 2), s, evaluate=False)]
+    plain = _EveryNode({"order": "none"})
+    for e in exprs:
+        assert to_text(e) == plain.doprint(e), e
+        assert to_text(s + e) == plain.doprint(s + e), e
+        assert to_text(e * sp.cos(e)) == plain.doprint(e * sp.cos(e)), e

@@ -6,7 +6,8 @@ from typing import Iterator
 
 import sympy as sp
 from sympy.printing.latex import LatexPrinter
-from sympy.printing.precedence import precedence
+from sympy.core.function import Function
+from sympy.printing.precedence import PRECEDENCE, precedence
 from sympy.printing.str import StrPrinter
 
 _SHARING = [0]  # depth of shared_subexpressions() blocks
@@ -61,7 +62,9 @@ class _PrintsEachNodeOnce:
         hit = self._precedences.get(id(expr))
         if hit is not None and hit[0] is expr:
             return hit[1]
-        value = precedence(expr)
+        value = _product_precedence(expr) if isinstance(expr, sp.Mul) else None
+        if value is None:
+            value = precedence(expr)
         self._precedences[id(expr)] = (expr, value)
         return value
 
@@ -196,8 +199,71 @@ def collecting() -> Iterator[list[sp.Basic]]:
         _COLLECTING[0] = previous
 
 
+def _product_precedence(expr: sp.Mul) -> int | None:
+    """sympy's precedence of a product whose numbers are finite and whose functions bind tighter than '*': Add's
+    when its coefficient is negative, else Mul's (precedence_Mul decides the same by negating the whole product
+    to ask Mul.could_extract_minus_sign whether -x == x). None for any other product."""
+    for a in expr.args:
+        if a.is_Number and not (a.is_Rational or a.is_Float):
+            return None
+        if isinstance(a, Function) and getattr(a, "precedence", PRECEDENCE["Func"]) < PRECEDENCE["Mul"]:
+            return None
+    first = expr.args[0]
+    return PRECEDENCE["Add"] if first.is_Number and first.is_extended_negative else PRECEDENCE["Mul"]
+
+
+def _plain_factor(a: sp.Expr) -> bool:
+    """A factor that StrPrinter._print_Mul puts in the numerator as it is, in a product it does not treat as
+    unevaluated: a symbol, a sum, a function, or a power with a positive rational exponent (not of integers)."""
+    if not a.is_commutative or a.is_Number:
+        return False
+    if a.is_Pow:
+        return a.exp.is_Rational and a.exp.is_positive and not all(x.is_Integer for x in a.args)
+    return a.is_Symbol or a.is_Add or isinstance(a, Function)
+
+
 class YamlExprPrinter(_PrintsEachNodeOnce, StrPrinter):
     """str() with the function names of the YAML language: abs, min, max, exp(1) instead of E."""
+
+    def _print_Mul(self, expr: sp.Mul) -> str:
+        """StrPrinter._print_Mul's text, built directly for the common product (a rational coefficient, then
+        symbols, sums, functions and positive powers): sympy's builds the product's negation twice and the
+        product without its coefficient for it. Any other product is sympy's own."""
+        args = expr.args
+        coeff = args[0] if args[0].is_Number else None
+        rest = args[1:] if coeff is not None else args
+        if coeff is sp.S.One or coeff is not None and not coeff.is_Rational or not all(map(_plain_factor, rest)):
+            return super()._print_Mul(expr)
+        prec = _product_precedence(expr)
+        if prec is None:
+            return super()._print_Mul(expr)
+        negative = coeff is not None and coeff.is_negative
+        c = -coeff if negative else coeff
+        top: list[sp.Expr] = []
+        bottom = ""
+        if c is not None and c is not sp.S.One:
+            if c.p != 1:
+                top.append(sp.Integer(c.p))
+            if c.q != 1:
+                bottom = "/" + self.parenthesize(sp.Integer(c.q), prec, strict=False)
+        top.extend(rest)
+        return ("-" if negative else "") + "*".join(self.parenthesize(x, prec, strict=False) for x in top) + bottom
+
+    def _print_Add(self, expr: sp.Add, order=None) -> str:
+        """StrPrinter._print_Add's text, each term's precedence asked once (remembered with the term)."""
+        if order is not None:
+            return super()._print_Add(expr, order)
+        prec = self._precedence(expr)
+        out = []
+        for term in self._as_ordered_terms(expr):
+            t = self._print(term)
+            if t.startswith("-") and not term.is_Add:
+                sign, t = "-", t[1:]
+            else:
+                sign = "+"
+            out += [sign, f"({t})" if self._precedence(term) < prec or term.is_Add else t]
+        sign = out.pop(0)
+        return ("" if sign == "+" else sign) + " ".join(out)
 
     def parenthesize(self, item, level, strict: bool = False) -> str:
         """StrPrinter.parenthesize (the same text) with the precedence asked once and remembered."""
