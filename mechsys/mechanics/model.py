@@ -66,7 +66,7 @@ class Sums:
             self.add(start)
 
     def add(self, mat: sp.Matrix) -> None:
-        for k, e in enumerate(mat):
+        for k, e in enumerate(e for row in mat.tolist() for e in row):
             if e != 0:
                 self.terms[k].append(e)
 

@@ -15,8 +15,7 @@ __all__ = ["product", "gram"]
 
 
 def _nonzero_rows(A: sp.MatrixBase) -> list[dict[int, sp.Expr]]:
-    rows, cols = A.shape
-    return [{k: A[i, k] for k in range(cols) if A[i, k] != 0} for i in range(rows)]
+    return [{k: a for k, a in enumerate(row) if a != 0} for row in A.tolist()]
 
 
 def product(A: sp.MatrixBase, B: sp.MatrixBase) -> sp.Matrix:
@@ -25,31 +24,32 @@ def product(A: sp.MatrixBase, B: sp.MatrixBase) -> sp.Matrix:
         raise ValueError(f"cannot multiply {A.shape} by {B.shape}")
     m, o = A.shape[0], B.shape[1]
     b_rows = _nonzero_rows(B)
-    out = sp.zeros(m, o)
+    out = [[sp.S.Zero] * o for _ in range(m)]
     for i, a_row in enumerate(_nonzero_rows(A)):
         terms: dict[int, list] = {}
         for k, a in a_row.items():
             for j, b in b_rows[k].items():
                 terms.setdefault(j, []).append(a * b)
         for j, t in terms.items():
-            out[i, j] = sp.Add(*t)
-    return out
+            out[i][j] = sp.Add(*t)
+    return sp.Matrix(m, o, [e for row in out for e in row])
 
 
 def gram(J: sp.MatrixBase, scale: sp.Expr = sp.S.One) -> sp.Matrix:
     """(scale * J).T * J (a mass matrix's m Jv^T Jv): the upper triangle built, the lower one mirrored."""
     rows, n = J.shape
-    scaled = J if scale == 1 else scale * J
-    cols = [{x: scaled[x, i] for x in range(rows) if J[x, i] != 0} for i in range(n)]
-    plain = [{x: J[x, i] for x in cols[i]} for i in range(n)]
+    entries = J.T.tolist()  # column by column
+    scaled = entries if scale == 1 else (scale * J).T.tolist()
+    cols = [{x: scaled[i][x] for x in range(rows) if entries[i][x] != 0} for i in range(n)]
+    plain = [{x: entries[i][x] for x in cols[i]} for i in range(n)]
     times = _Products([a for c in cols for a in c.values()] + [b for c in plain for b in c.values()])
-    out = sp.zeros(n, n)
+    out = [[sp.S.Zero] * n for _ in range(n)]
     for i in range(n):
         for j in range(i, n):
             t = [times(a, plain[j][x]) for x, a in cols[i].items() if x in plain[j]]
             if t:
-                out[i, j] = out[j, i] = sp.Add(*t)
-    return out
+                out[i][j] = out[j][i] = sp.Add(*t)
+    return sp.Matrix(n, n, [e for row in out for e in row])
 
 
 class _Products:
