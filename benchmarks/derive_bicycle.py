@@ -28,10 +28,11 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 BIKE = str(ROOT / "systems" / "bicycle.yaml")
 MECHSYS = str(Path(sys.executable).with_name("mechsys"))
-#: the commands users run on a model, with the options that keep them about the symbolic stage
+#: the commands users run on a model (derive in its default text form: the readable clean-up and the named
+#: subexpressions included), the others with the options that keep them about the symbolic stage
 COMMANDS = {
-    "derive-kane": ["derive", BIKE, "--method", "kane", "-f", "json"],
-    "derive": ["derive", BIKE, "-f", "json"],
+    "derive-kane": ["derive", BIKE, "--method", "kane"],
+    "derive": ["derive", BIKE],
     "info": ["info", BIKE, "-f", "json"],
     "simulate": ["simulate", BIKE, "--t-end", "0.1", "-f", "json"],
     "modes": ["modes", BIKE, "-f", "json"],

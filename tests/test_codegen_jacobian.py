@@ -66,6 +66,18 @@ def _chain_reference() -> tuple[list[str], sp.Matrix, sp.Matrix, tuple, tuple]:
     return names, M, f, q, u
 
 
+def reference_case(case: str, tmp_path) -> tuple:
+    """(model file, coordinate names, M, f, q symbols, u symbols) of an independent reference: "chain" (the rods
+    above, its file written to tmp_path) or a case of tests/test_lagrange_reference.py ("furuta", "zxz")."""
+    if case == "chain":
+        path = tmp_path / "rods.yaml"
+        path.write_text(CHAIN)
+        names, M, f, q, u = _chain_reference()
+        return path, names, M, f, q, u
+    path, system = _reference(case)
+    return path, list(system.names), system.M, system.f, system.q, system.u
+
+
 _REFERENCES: dict = {}  # case -> its reference Jacobian (one per model for both methods)
 
 
@@ -87,13 +99,7 @@ def _generated_module(pkg, folder):
 @pytest.mark.parametrize("method", ["lagrange", "kane"])
 @pytest.mark.parametrize("case", ["furuta", "zxz", "chain"])
 def test_residual_jacobian_equals_sympys_jacobian_of_the_reference(case, method, tmp_path):
-    if case == "chain":
-        path = tmp_path / "rods.yaml"
-        path.write_text(CHAIN)
-        names, M, f, q, u = _chain_reference()
-    else:
-        path, system = _reference(case)
-        names, M, f, q, u = list(system.names), system.M, system.f, system.q, system.u
+    path, names, M, f, q, u = reference_case(case, tmp_path)
     reference = _REFERENCES.get(case) or _REFERENCES.setdefault(case, _reference_jacobian(M, f, q, u))
 
     model = mechsys.load(path)

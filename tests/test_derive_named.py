@@ -12,17 +12,15 @@ import re
 import numpy as np
 import pytest
 import sympy as sp
-
-import mechsys
 from typer.testing import CliRunner
 
+import mechsys
 from helpers import SYSTEMS_DIR
 from mechsys.cli import app
 from mechsys.model.expressions import parse_expression
 from mechsys.report.derive import render
 from mechsys.report.printing import SubexpressionNames, naming, to_latex, to_text
-from test_codegen_jacobian import CHAIN, _chain_reference
-from test_lagrange_reference import _reference
+from test_codegen_jacobian import reference_case
 
 
 def run_cli(*args: str):
@@ -50,13 +48,7 @@ def _numbers(data: dict, model, q: np.ndarray, u: np.ndarray) -> tuple[np.ndarra
 
 
 def _case(name: str, tmp_path):
-    if name == "chain":
-        path = tmp_path / "rods.yaml"
-        path.write_text(CHAIN)
-        names, M, f, q, u = _chain_reference()
-    else:
-        path, system = _reference(name)
-        names, M, f, q, u = list(system.names), system.M, system.f, system.q, system.u
+    path, names, M, f, q, u = reference_case(name, tmp_path)
     return path, names, sp.lambdify((*q, *u), M, "numpy"), sp.lambdify((*q, *u), f, "numpy")
 
 
