@@ -298,6 +298,23 @@ class _DottedLatexPrinter(_PrintsEachNodeOnce, LatexPrinter):
     def _name(self, name: str) -> str:
         return _latex_name(name)
 
+    def _print_Add(self, expr: sp.Add, order=None) -> str:
+        """LaTeX's sum (a term's minus sign taken out, ' - ' before it); in a naming() block a named term keeps
+        its sign inside its name (' + z_{7}'), where sympy would negate it and write the negation out."""
+        naming = _NAMING[0]
+        if naming is None:
+            return super()._print_Add(expr, order)
+        tex = ""
+        for i, term in enumerate(self._as_ordered_terms(expr, order=order)):
+            if i and term not in naming.names and term.could_extract_minus_sign():
+                tex += " - "
+                term = -term
+            elif i:
+                tex += " + "
+            text = self._print(term)
+            tex += rf"\left({text}\right)" if self._needs_add_brackets(term) else text
+        return tex
+
     def _needs_brackets(self, expr) -> bool:
         return not _named(expr) and super()._needs_brackets(expr)
 
