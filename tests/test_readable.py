@@ -400,3 +400,24 @@ def test_the_readable_form_does_not_change_with_the_process(tmp_path):
         assert run.returncode == 0, run.stderr
         outputs.add(run.stdout)
     assert len(outputs) == 1
+
+
+def test_a_stored_clean_up_holds_only_the_entries_it_changed(tmp_path, monkeypatch):
+    """The cache keeps the changed entries only (the rest are the derived ones): with a budget that runs out,
+    fewer than all; read back, the clean-up and its counts equal a fresh one's."""
+    from mechsys.numeric import cache
+
+    monkeypatch.setenv("MECHSYS_CACHE", str(tmp_path / "cache"))
+    model = load_system("gyrostabilizer")
+    eq = model.equations("lagrange")
+    fresh = rd.readable(eq, budget=100)
+    first = rd.stored_readable(model, eq, budget=100)
+    assert fresh.left_as_derived > 0 and entries(first.equations) == entries(fresh.equations)
+    [data] = [d for e in tmp_path.joinpath("cache").glob("*.json") if (d := cache.load(e.stem)) and "counts" in d]
+    changed = [k for k, (a, b) in enumerate(zip(rd._flat(fresh.equations), rd._flat(eq))) if a != b]
+    assert data["changed"] == changed and 0 < len(changed) < len(rd._flat(eq))
+    monkeypatch.setattr(rd, "readable", lambda *a, **k: pytest.fail("cleaned up again"))
+    again = rd.stored_readable(load_system("gyrostabilizer"), load_system("gyrostabilizer").equations("lagrange"),
+                               budget=100)
+    assert entries(again.equations) == entries(fresh.equations)
+    assert (again.entries, again.left_as_derived, again.spent) == (fresh.entries, fresh.left_as_derived, fresh.spent)

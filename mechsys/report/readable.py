@@ -453,11 +453,12 @@ def clean_expression(expr: sp.Expr, budget: int | None = None) -> sp.Expr:
 
 
 def stored_readable(model, eq: Equations, budget: int | None = None) -> Cleanup:
-    """readable(eq) for ``model``'s own derived equations, kept in the derivation cache as data (the cleaned
-    expressions through mechanics/serialize.py's whitelist, and the budget's counts), so a second `derive` of the
-    model prints without cleaning up again. The key is the model's (cache.model_key: structure, names, decisions,
-    code), the formulation, the budget and this module's source; a stored entry that does not fit the equations'
-    shapes is ignored."""
+    """readable(eq) for ``model``'s own derived equations, kept in the derivation cache as data (the entries the
+    clean-up changed, through mechanics/serialize.py's whitelist, and the budget's counts), so a second `derive`
+    of the model prints without cleaning up again. Only the changed entries are stored: the rest are the derived
+    ones (the 80-link chain's budget reaches 2 % of its entries; storing all of them again took 2.5 s). The key is
+    the model's (cache.model_key: structure, names, decisions, code), the formulation, the budget and this
+    module's source; a stored entry that does not fit the equations' shapes is ignored."""
     import hashlib
     from pathlib import Path
 
@@ -470,27 +471,55 @@ def stored_readable(model, eq: Equations, budget: int | None = None) -> Cleanup:
         return readable(eq, budget)
     digest = hashlib.sha256(Path(__file__).read_bytes()).hexdigest()[:16]
     key = cache.model_key(model, f"readable:{eq.method}:{budget}:{digest}")
-    names = derivations.PARTS
+    derived = _flat(eq)
     entry = cache.load(key)
     if entry is not None:
-        exprs = serialize.load(entry.get("expressions"), symbols)
-        counts = entry.get("counts")
-        size = sum(len(getattr(eq, k)) for k in names) + 2
-        if exprs is not None and len(exprs) == size and isinstance(counts, list) and len(counts) == 4 \
-                and all(isinstance(c, int) for c in counts):
-            mats, k = {}, 0
-            for name in names:
-                shape = getattr(eq, name).shape
-                mats[name] = sp.Matrix(*shape, exprs[k:k + shape[0] * shape[1]])
-                k += shape[0] * shape[1]
-            return Cleanup(replace(eq, T=exprs[-2], V=exprs[-1], **mats), counts[0], counts[1], counts[2], budget,
-                           counts[3])
+        stored = _stored(entry, symbols, len(derived))
+        if stored is not None:
+            changed, counts = stored
+            flat = list(derived)
+            for k, expr in changed.items():
+                flat[k] = expr
+            return Cleanup(_unflat(eq, flat), counts[0], counts[1], counts[2], budget, counts[3])
     cleanup = readable(eq, budget)
-    out = cleanup.equations
+    changed = {k: e for k, (e, d) in enumerate(zip(_flat(cleanup.equations), derived)) if e is not d and e != d}
     try:
-        data = serialize.dump([e for k in names for e in getattr(out, k)] + [out.T, out.V], symbols)
+        data = serialize.dump(list(changed.values()), symbols)
     except serialize.Unsupported:
         return cleanup
-    cache.store(key, {"expressions": data, "counts": [cleanup.entries, cleanup.left_as_derived,
-                                                      cleanup.partly_cleaned, cleanup.spent]})
+    cache.store(key, {"changed": list(changed), "expressions": data,
+                      "counts": [cleanup.entries, cleanup.left_as_derived, cleanup.partly_cleaned, cleanup.spent]})
     return cleanup
+
+
+def _flat(eq: Equations) -> list[sp.Expr]:
+    """The entries of M, f, Q, A, b (row by row), then T and V."""
+    from mechsys.mechanics.derivations import PARTS
+
+    return [e for name in PARTS for e in getattr(eq, name)] + [eq.T, eq.V]
+
+
+def _unflat(eq: Equations, flat: list[sp.Expr]) -> Equations:
+    """``eq`` with its entries replaced by ``flat`` (in _flat's order)."""
+    from mechsys.mechanics.derivations import PARTS
+
+    mats, k = {}, 0
+    for name in PARTS:
+        rows, cols = getattr(eq, name).shape
+        mats[name] = sp.Matrix(rows, cols, flat[k:k + rows * cols])
+        k += rows * cols
+    return replace(eq, T=flat[-2], V=flat[-1], **mats)
+
+
+def _stored(entry: dict, symbols: dict, size: int) -> tuple[dict[int, sp.Expr], list[int]] | None:
+    """(the changed entries by position, the counts) of a stored clean-up, or None when it does not fit."""
+    from mechsys.mechanics import serialize
+
+    positions, counts = entry.get("changed"), entry.get("counts")
+    exprs = serialize.load(entry.get("expressions"), symbols)
+    if exprs is None or not isinstance(positions, list) or len(positions) != len(exprs) \
+            or not all(type(k) is int and 0 <= k < size for k in positions) or len(set(positions)) != len(positions):
+        return None
+    if not (isinstance(counts, list) and len(counts) == 4 and all(type(c) is int for c in counts)):
+        return None
+    return dict(zip(positions, exprs)), counts
