@@ -11,7 +11,7 @@ import sympy as sp
 
 import mechsys
 from mechsys.mechanics import build
-from mechsys.mechanics.dag import value
+from mechsys.mechanics.dag import Evaluation, value
 
 ROOT = Path(__file__).resolve().parents[1]
 x, y, z = sp.symbols("x y z", real=True)
@@ -45,6 +45,32 @@ def test_value_equals_evalf_on_random_expressions():
         assert got == pytest.approx(want.real, rel=1e-9, abs=1e-9) and abs(want.imag) <= 1e-9 * max(1, abs(want))
         compared += 1
     assert compared > 45
+
+
+def test_an_evaluation_with_a_symbol_moved_equals_a_fresh_one():
+    """Evaluation(base=..., changed={x}) takes base's value of every node free of x and computes the rest: the
+    same floats as a fresh evaluation at the moved point, and a magnitude at least every node's absolute value."""
+    rng = np.random.default_rng(5)
+    compared = 0
+    for _ in range(40):
+        exprs = [_draw(rng, 4) for _ in range(3)]
+        exprs.append(exprs[0] * exprs[1] + exprs[2])  # shared subtrees across the expressions
+        point = dict(zip((x, y, z), rng.uniform(-1.5, 1.5, 3)))
+        moved = {**point, x: point[x] + 0.7}
+        base = Evaluation(point)
+        shifted = Evaluation(moved, base=base, changed=frozenset({x}))
+        fresh = Evaluation(moved)
+        for e in exprs:
+            assert base.of(e) == Evaluation(point).of(e)
+            assert shifted.of(e) == fresh.of(e)
+            got = fresh.of(e)
+            assert (got is None) == (value(e, moved) is None)
+            if got is not None:
+                compared += 1
+                assert got[0] == value(e, moved)
+                nodes = [n for n in sp.preorder_traversal(e) if n.args]
+                assert got[1] >= max([abs(v) for n in nodes if (v := value(n, moved)) is not None] + [abs(got[0])])
+    assert compared > 75
 
 
 @pytest.mark.parametrize("expr", [sp.sqrt(-1 - x ** 2), sp.log(-1 - x ** 2), 1 / (x - x.subs(x, 0.25)),

@@ -113,10 +113,12 @@ def test_the_symbolic_proof_of_a_cyclic_coordinate_has_a_size_budget(monkeypatch
 
 @pytest.mark.parametrize("name", ["four_bar", "centrifuge", "rolling_disk"])
 def test_a_second_info_reads_its_matrices_from_the_cache_and_says_the_same(name, tmp_path, monkeypatch):
-    """Issue 13: `info` compiled M and A (sympy CSE) on every run; their generated code is now cached like the
-    simulation's. A cached run generates no code and gives what an uncached one gives."""
+    """Issue 13: `info` compiled M and A (sympy CSE) on every run; where it still compiles them (an entry that
+    floating point does not evaluate, forced here), their generated code is cached like the simulation's. A cached
+    run generates no code and gives what an uncached one gives."""
     import mechsys.analysis.info as info
 
+    monkeypatch.setattr(info, "_evaluated", lambda *args: None)
     monkeypatch.setenv("MECHSYS_CACHE", "off")
     uncached = asdict_info(system_info(mechsys.load(ROOT / "systems" / f"{name}.yaml")))
     monkeypatch.setenv("MECHSYS_CACHE", str(tmp_path / "cache"))
@@ -128,6 +130,22 @@ def test_a_second_info_reads_its_matrices_from_the_cache_and_says_the_same(name,
     monkeypatch.setattr(info, "matrix_source", no_code)
     second = asdict_info(system_info(mechsys.load(ROOT / "systems" / f"{name}.yaml")))
     assert first == second == uncached
+
+
+@pytest.mark.parametrize("name", ["four_bar", "centrifuge", "rolling_disk", "indicator", "gyrostabilizer"])
+def test_info_evaluates_m_and_a_without_code_and_says_what_compiled_code_says(name, monkeypatch):
+    """`info` evaluates A and M at its three states over their expression DAGs (no CSE, no compiled code): the
+    facts equal those of the compiled matrices."""
+    import mechsys.analysis.info as info
+
+    monkeypatch.setenv("MECHSYS_CACHE", "off")
+    evaluated = asdict_info(system_info(mechsys.load(ROOT / "systems" / f"{name}.yaml")))
+    monkeypatch.setattr(info, "matrix_source", lambda *a, **k: pytest.fail("compiled"))
+    assert asdict_info(system_info(mechsys.load(ROOT / "systems" / f"{name}.yaml"))) == evaluated
+    monkeypatch.undo()
+    monkeypatch.setenv("MECHSYS_CACHE", "off")
+    monkeypatch.setattr(info, "_evaluated", lambda *args: None)
+    assert asdict_info(system_info(mechsys.load(ROOT / "systems" / f"{name}.yaml"))) == evaluated
 
 
 def test_the_autonomy_decision_is_remembered_and_equals_a_fresh_one(tmp_path, monkeypatch):
@@ -152,3 +170,53 @@ def test_the_autonomy_decision_is_remembered_and_equals_a_fresh_one(tmp_path, mo
         assert len(decided) == before + 1
     mechsys.load(SYSTEMS_DIR / "indicator.yaml", {"Omega": 100}).is_autonomous()
     assert len(decided) == 4
+
+
+def _rods(n: int, gravity: bool) -> str:
+    """An n-link pendulum of rods with relative angles, written as a user would."""
+    lines = ["name: rods", "parameters: {m: 0.7, l: 0.9, g: 9.81}", "coordinates:"]
+    lines += [f"  q{k}: {{initial: 0.1, rate: 0}}" for k in range(1, n + 1)] + ["links:"]
+    for k in range(1, n + 1):
+        parent = "ground" if k == 1 else f"rod{k - 1}"
+        origin = "" if k == 1 else ", origin: [l, 0, 0]"
+        lines += [f"  rod{k}:", f"    joint: {{type: revolute, parent: {parent}, axis: z, coordinate: q{k}{origin}}}",
+                  "    mass: m", "    center_of_mass: [l/2, 0, 0]", "    shape: {rod: {length: l, axis: x}}"]
+    if gravity:
+        lines += ["forces:", "  - {type: gravity, acceleration: [0, -g, 0]}"]
+    return "\n".join(lines) + "\n"
+
+
+def test_a_chain_s_angles_are_shown_not_cyclic_without_compiled_code(tmp_path, monkeypatch):
+    """Issue 13: the cyclic decision compiled M and f whole (29 s of the 80-link chain's `info`). Shifting one
+    angle changes a few small entries: evaluated in floating point (symmetry._Entries), no code is compiled. The
+    first angle changes f only (gravity); without gravity it is cyclic (the chain turns as a whole: closed form),
+    which the compiled test confirms."""
+    from mechsys.mechanics import symmetry
+
+    monkeypatch.setenv("MECHSYS_CACHE", "off")
+    compiled = []
+    real = symmetry._Shifts._fn
+    monkeypatch.setattr(symmetry._Shifts, "_fn", lambda self, k: compiled.append(k) or real(self, k))
+    for gravity, cyclic in ((True, []), (False, ["q1"])):
+        path = tmp_path / f"rods_{gravity}.yaml"
+        path.write_text(_rods(12, gravity))
+        compiled.clear()
+        decision = mechsys.load(path).cyclic_decision
+        assert decision.names == cyclic
+        assert (compiled == []) is gravity
+
+
+MODELS = sorted([*(ROOT / "systems").glob("*.yaml"), *(ROOT / "tests" / "data" / "beyond").glob("*.yaml")])
+
+
+@pytest.mark.parametrize("path", MODELS, ids=[p.stem for p in MODELS])
+def test_the_uncompiled_first_test_decides_as_the_compiled_one_alone(path, monkeypatch):
+    """The cyclic coordinates (and their basis) of every bundled model and the user-written ones (tops, Furuta,
+    torque-free bodies) are the same with the uncompiled first test as with the compiled test alone."""
+    from mechsys.mechanics import symmetry
+
+    monkeypatch.setenv("MECHSYS_CACHE", "off")
+    with_first = mechsys.load(path).cyclic_decision
+    monkeypatch.setattr(symmetry._Entries, "dependent", lambda self, q: False)
+    alone = mechsys.load(path).cyclic_decision
+    assert (with_first.names, with_first.basis, with_first.denied) == (alone.names, alone.basis, alone.denied)

@@ -6,6 +6,7 @@ import numpy as np
 from mechsys.analysis.crosscheck import random_states
 from mechsys.analysis.facts import Info, JointRow
 from mechsys.errors import AnalysisError
+from mechsys.mechanics.dag import Evaluation
 from mechsys.mechanics.model import INTERNAL_METHOD, MechanicalModel
 from mechsys.numeric import cache
 from mechsys.numeric.lambdify import matrix_source
@@ -37,6 +38,23 @@ def _matrices(model: MechanicalModel):
     return matrix_from_source(desc["A"]), matrix_from_source(desc["M"])
 
 
+def _evaluated(model: MechanicalModel, states: list, p: list[float]) -> tuple[list, list] | None:
+    """A and M at the states in floating point, over their expression DAGs (dag.Evaluation: each shared node once;
+    three states need no compiled code: the 80-link chain's M took 22 s to generate and compile); None when an
+    entry is not a finite value of sums, products, powers and elementary functions (then _matrices compiles)."""
+    mats = (model.constraint_jacobian, model.equations(INTERNAL_METHOD).M)
+    out: tuple[list, list] = ([], [])
+    for t, q, u in states:
+        point = Evaluation({model.t: t, **dict(zip(model.q, q)), **dict(zip(model.u, u)),
+                            **dict(zip(model.parameter_symbols, p))})
+        for mat, values in zip(mats, out):
+            entries = [point.of(e) for e in mat]
+            if None in entries:
+                return None
+            values.append(np.array([v for v, _ in entries], dtype=float).reshape(mat.shape))
+    return out
+
+
 def system_info(model: MechanicalModel) -> Info:
     kin = model.kin
     joints = [JointRow(j.link, j.parent, j.type, j.coordinates, j.joint_class, j.reactions) for j in kin.joints]
@@ -47,16 +65,19 @@ def system_info(model: MechanicalModel) -> Info:
     params = model.parameter_symbols
     p = [model.parameters[s.name] for s in params]
     states = random_states(model, 3, seed=7)
-    A_fn, M_fn = _matrices(model)
+    evaluated = _evaluated(model, states, p)
+    if evaluated is None:
+        A_fn, M_fn = _matrices(model)
+        evaluated = ([A_fn(t, q, u, p) for t, q, u in states], [M_fn(t, q, u, p) for t, q, u in states])
+    As, Ms = evaluated
     hol = [i for i, c in enumerate(kin.constraints) if c.kind == "holonomic"]
-    rank = max(_rank(A_fn(t, q, u, p)) for t, q, u in states)
-    hol_rank = max(_rank(A_fn(t, q, u, p)[hol, :]) for t, q, u in states) if hol else 0
+    rank = max(_rank(A) for A in As)
+    hol_rank = max(_rank(A[hol, :]) for A in As) if hol else 0
     nfree = len(model.q)
     dof = nfree - rank
     massless = []
     notes = []
     if nfree:
-        Ms = [M_fn(t, q, u, p) for t, q, u in states]
         if not all(np.all(np.isfinite(M)) for M in Ms):
             raise AnalysisError("the mass matrix is not finite at sample states (an overflow or a division by zero: "
                                 "check the parameter values, e.g. a mass of 1e200 squared)")

@@ -103,40 +103,79 @@ def value(expr: sp.Basic, values: Mapping[sp.Symbol, float]) -> Optional[float]:
     rolling constraint's row, which xreplace with Floats walks path by path: a tenth of the time); None when a
     symbol has no value, a node is not a sum, product, power, number or elementary function, or a step leaves
     the reals (a domain error, an overflow): the caller then asks sympy."""
-    root = sp.sympify(expr)
-    memo: dict[int, float] = {}
-    stack = [root]
-    try:
+    out = Evaluation(values).of(expr)
+    return out[0] if out is not None else None
+
+
+class Evaluation:
+    """``of(expr)``: (value, magnitude) of expressions at one point in machine floating point, each shared node
+    computed once across all of them; the magnitude is the largest absolute value of any node on the way (a
+    scale for the round-off of the value: a difference below ROUND_OFF times it may be cancellation). None when
+    a symbol has no value, a node is not a sum, product, power, number or elementary function, or the value is
+    not a finite real. ``base`` and ``changed``: the same point with the symbols ``changed`` moved; a node free
+    of them takes base's value (a coordinate shifted: only the nodes that contain it are computed again)."""
+
+    def __init__(self, values: Mapping[sp.Symbol, float], base: "Evaluation | None" = None,
+                 changed: frozenset = frozenset(), free: FreeSymbols | None = None) -> None:
+        self.values = values
+        self.base = base
+        self.changed = changed
+        self.free = free if free is not None else (base.free if base is not None else FreeSymbols())
+        self._memo: dict[int, tuple[sp.Basic, Optional[tuple[float, float]]]] = {}
+
+    def of(self, expr: sp.Basic) -> Optional[tuple[float, float]]:
+        root = sp.sympify(expr)
+        memo = self._memo
+        stack = [root]
         while stack:  # iterative post-order: a deep product never reaches Python's recursion limit
             node = stack[-1]
             if id(node) in memo:
                 stack.pop()
                 continue
-            if node.is_Symbol:
-                memo[id(node)] = float(values[node])
+            if self.base is not None and node.args and not self.changed & self.free.of(node):
+                result = self.base.of(node)
+            elif node.is_Symbol:
+                result = _finite(self.values.get(node))
             elif node.is_Number or node.is_NumberSymbol:
-                memo[id(node)] = float(node)
+                result = _finite(node)
             else:
                 waiting = [a for a in node.args if id(a) not in memo]
                 if waiting:
                     stack.extend(waiting)
                     continue
-                args = [memo[id(a)] for a in node.args]
-                if node.is_Add:
-                    result = math.fsum(args)
-                elif node.is_Mul:
-                    result = math.prod(args)
-                elif node.is_Pow:
-                    result = math.pow(args[0], args[1])
-                elif type(node) is sp.atan2:
-                    result = math.atan2(args[0], args[1])
-                elif type(node) in _MATH and len(args) == 1:
-                    result = _MATH[type(node)](args[0])
-                else:
-                    return None
-                memo[id(node)] = result
+                args = [memo[id(a)][1] for a in node.args]
+                result = None if None in args else _apply(node, args)
+            memo[id(node)] = (node, result)
             stack.pop()
-    except (KeyError, ValueError, OverflowError, ZeroDivisionError, TypeError):
+        return memo[id(root)][1]
+
+
+def _finite(x: object) -> Optional[tuple[float, float]]:
+    try:
+        v = float(x)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
         return None
-    result = memo[id(root)]
-    return result if math.isfinite(result) else None
+    return (v, abs(v)) if math.isfinite(v) else None
+
+
+def _apply(node: sp.Basic, args: list[tuple[float, float]]) -> Optional[tuple[float, float]]:
+    """The node's (value, magnitude) from its arguments'; None outside the supported nodes or the reals."""
+    xs = [a[0] for a in args]
+    try:
+        if node.is_Add:
+            result = math.fsum(xs)
+        elif node.is_Mul:
+            result = math.prod(xs)
+        elif node.is_Pow:
+            result = math.pow(xs[0], xs[1])
+        elif type(node) is sp.atan2:
+            result = math.atan2(xs[0], xs[1])
+        elif type(node) in _MATH and len(xs) == 1:
+            result = _MATH[type(node)](xs[0])
+        else:
+            return None
+    except (ValueError, OverflowError, ZeroDivisionError, TypeError):
+        return None
+    if not math.isfinite(result):
+        return None
+    return result, max(abs(result), *(a[1] for a in args))
