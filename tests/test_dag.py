@@ -20,8 +20,10 @@ def test_the_free_symbols_of_derived_equations_are_sympys(name):
     for method in ("lagrange", "kane"):
         eq = model.equations(method)
         entries = [e for m in (eq.M, eq.f, eq.A, eq.b) for e in m] + [eq.T, eq.V]
+        names = sorted(eq.M.free_symbols | eq.f.free_symbols, key=str) + [sp.Symbol("never_seen")]
         for e in entries:
             assert symbols.of(e) == e.free_symbols
+            assert [symbols.has(e, s) for s in names] == [s in e.free_symbols for s in names]
         assert symbols.of_all(eq.M) == eq.M.free_symbols
 
 
@@ -44,6 +46,7 @@ def test_random_expressions_with_bound_variables_and_conditions():
     for _ in range(80):
         e = grow(rng.randrange(1, 5))
         assert symbols.of(e) == e.free_symbols, e
+        assert [symbols.has(e, s) for s in (x, y, a)] == [s in e.free_symbols for s in (x, y, a)], e
         try:
             expected = e.xreplace(substitution.mapping)
         except (TypeError, ValueError) as exc:  # e.g. Max of arguments that cannot be compared: the same refusal

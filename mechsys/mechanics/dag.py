@@ -17,37 +17,76 @@ _PLAIN = (sp.Add, sp.Mul, sp.Pow, sp.Function, sp.Tuple)
 
 class FreeSymbols:
     """``of(expr)``: the free symbols of expr, each subexpression object's computed once (kept with its object,
-    so an id is never reused while remembered); equal to ``expr.free_symbols``."""
+    so an id is never reused while remembered); equal to ``expr.free_symbols``. Held as bit masks over the
+    symbols met so far (a union is an integer or: a long chain's nodes carry 160 symbols each, and unions of
+    frozensets were most of its cyclic decision); ``mask`` and ``has`` ask without building a set."""
 
     def __init__(self) -> None:
-        self._memo: dict[int, tuple[sp.Basic, frozenset]] = {}
+        self._memo: dict[int, tuple[sp.Basic, int]] = {}
+        self._bits: dict[sp.Basic, int] = {}
+        self._symbols: list[sp.Basic] = []
+        self._sets: dict[int, frozenset] = {0: frozenset()}
 
-    def _known(self, node: sp.Basic) -> frozenset | None:
-        hit = self._memo.get(id(node))
-        return hit[1] if hit is not None and hit[0] is node else None
+    def bits(self, symbols: Iterable[sp.Basic]) -> int:
+        """The mask of ``symbols`` (each symbol gets its bit when first met)."""
+        mask = 0
+        for s in symbols:
+            bit = self._bits.get(s)
+            if bit is None:
+                bit = self._bits[s] = 1 << len(self._symbols)
+                self._symbols.append(s)
+            mask |= bit
+        return mask
 
-    def of(self, expr: sp.Basic) -> frozenset:
-        hit = self._known(expr)
-        if hit is not None:
-            return hit
+    def mask(self, expr: sp.Basic) -> int:
+        """The mask of expr's free symbols."""
+        memo = self._memo
+        hit = memo.get(id(expr))
+        if hit is not None and hit[0] is expr:
+            return hit[1]
         expr = sp.sympify(expr)
         stack = [(expr, False)]
         while stack:  # iterative post-order: deep sums and products never reach the recursion limit
             node, ready = stack.pop()
-            if self._known(node) is not None:
+            hit = memo.get(id(node))
+            if hit is not None and hit[0] is node:
                 continue
             if not node.args or not isinstance(node, _PLAIN):
-                self._memo[id(node)] = (node, frozenset(node.free_symbols))
+                memo[id(node)] = (node, self.bits(node.free_symbols))
             elif ready:
-                self._memo[id(node)] = (node, frozenset().union(*(self._known(a) for a in node.args)))
+                mask = 0
+                for a in node.args:
+                    mask |= memo[id(a)][1]
+                memo[id(node)] = (node, mask)
             else:
                 stack.append((node, True))
-                stack.extend((a, False) for a in node.args if self._known(a) is None)
-        return self._known(expr)
+                for a in node.args:
+                    hit = memo.get(id(a))
+                    if hit is None or hit[0] is not a:
+                        stack.append((a, False))
+        return memo[id(expr)][1]
+
+    def has(self, expr: sp.Basic, symbol: sp.Basic) -> bool:
+        """``symbol in expr.free_symbols``."""
+        mask = self.mask(expr)  # (assigns the bits of expr's symbols first)
+        bit = self._bits.get(symbol)
+        return bit is not None and bool(mask & bit)
+
+    def _set(self, mask: int) -> frozenset:
+        out = self._sets.get(mask)
+        if out is None:
+            out = self._sets[mask] = frozenset(s for k, s in enumerate(self._symbols) if mask >> k & 1)
+        return out
+
+    def of(self, expr: sp.Basic) -> frozenset:
+        return self._set(self.mask(expr))
 
     def of_all(self, exprs: Iterable[sp.Basic]) -> frozenset:
         """The union over ``exprs`` (the entries of matrices, say)."""
-        return frozenset().union(*(self.of(e) for e in exprs))
+        mask = 0
+        for e in exprs:
+            mask |= self.mask(e)
+        return self._set(mask)
 
 
 class Substitution:
@@ -58,13 +97,13 @@ class Substitution:
 
     def __init__(self, mapping: Mapping[sp.Symbol, sp.Basic], free: FreeSymbols | None = None) -> None:
         self.mapping = {k: sp.sympify(v) for k, v in mapping.items()}
-        self.keys = frozenset(self.mapping)
         self.free = free or FreeSymbols()
+        self.keys = self.free.bits(self.mapping)
         self._memo: dict[int, tuple[sp.Basic, sp.Basic]] = {}
 
     def of(self, expr: sp.Basic) -> sp.Basic:
         expr = sp.sympify(expr)
-        if not self.keys & self.free.of(expr):
+        if not self.keys & self.free.mask(expr):
             return expr
         stack = [(expr, False)]
         while stack:  # iterative post-order, like FreeSymbols
@@ -73,7 +112,7 @@ class Substitution:
                 continue
             if node in self.mapping:
                 self._memo[id(node)] = (node, self.mapping[node])
-            elif not node.args or not self.keys & self.free.of(node):
+            elif not node.args or not self.keys & self.free.mask(node):
                 self._memo[id(node)] = (node, node)
             elif ready:
                 args = [self._known(a) for a in node.args]
@@ -121,6 +160,7 @@ class Evaluation:
         self.base = base
         self.changed = changed
         self.free = free if free is not None else (base.free if base is not None else FreeSymbols())
+        self._changed = self.free.bits(changed)
         self._memo: dict[int, tuple[sp.Basic, Optional[tuple[float, float]]]] = {}
 
     def of(self, expr: sp.Basic) -> Optional[tuple[float, float]]:
@@ -132,7 +172,7 @@ class Evaluation:
             if id(node) in memo:
                 stack.pop()
                 continue
-            if self.base is not None and node.args and not self.changed & self.free.of(node):
+            if self.base is not None and node.args and not self._changed & self.free.mask(node):
                 result = self.base.of(node)
             elif node.is_Symbol:
                 result = _finite(self.values.get(node))

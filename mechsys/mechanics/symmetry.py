@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from itertools import islice
 
 import numpy as np
 import sympy as sp
@@ -70,7 +71,7 @@ def decide(model) -> CyclicDecision:
             out.basis[name] = "absent"
         elif not quick.dependent(q) and check.independent(i, generic):
             out.names.append(name)
-            out.basis[name] = "symbolic" if _proven_constant([e for m in parts for e in m if q in symbols.of(e)], q) \
+            out.basis[name] = "symbolic" if _proven_constant([e for m in parts for e in m if symbols.has(e, q)], q) \
                 else "numeric"
     return out
 
@@ -101,18 +102,18 @@ def _size(expr: sp.Expr, limit: int) -> int:
 
 class _Entries:
     """The first test, before anything is compiled: shifting a coordinate changes one of the first TRIES entries
-    of M, f, A, b or Phi that contain it, evaluated in floating point at one generic state (dag.Evaluation:
-    only the nodes that contain the coordinate computed again), by more than ROUND_OFF times the largest value on
-    the way. It only ever proves a dependence; the rest is _Shifts' decision. An 80-link chain's `info`: its
-    compiled M and f took 29 s to show that no angle is cyclic."""
+    of M, f, A, b or Phi that contain it, evaluated in floating point at one generic state (dag.Evaluation: only
+    the nodes that contain the coordinate computed again), by more than ROUND_OFF times the largest value on the
+    way. It only ever proves a dependence; the rest is _Shifts' decision. An 80-link chain's `info`: its compiled
+    M and f took 29 s to show that no angle is cyclic."""
 
     def __init__(self, model, parts: list[sp.Matrix], symbols: FreeSymbols, p: np.ndarray) -> None:
         rng = np.random.default_rng(29)
         n = len(model.q)
         q = rng.uniform(-3, 3, n)
         self.shift = dict(zip(model.q, q + rng.uniform(0.4, 2.6, n)))
-        self.values = {model.t: rng.uniform(0, 5), **dict(zip(model.q, q)), **dict(zip(model.u, rng.uniform(-2, 2, n))),
-                       **dict(zip(model.parameter_symbols, p))}
+        self.values = {model.t: rng.uniform(0, 5), **dict(zip(model.q, q)),
+                       **dict(zip(model.u, rng.uniform(-2, 2, n))), **dict(zip(model.parameter_symbols, p))}
         self.symbols = symbols
         self.base = Evaluation(self.values, free=symbols)
         self.parts = [[e for e in m if e.args] for m in parts]
@@ -120,13 +121,7 @@ class _Entries:
     def dependent(self, q: sp.Symbol) -> bool:
         shifted = Evaluation({**self.values, q: self.shift[q]}, base=self.base, changed=frozenset({q}))
         for entries in self.parts:
-            tried = 0
-            for e in entries:
-                if tried == TRIES:
-                    break
-                if q not in self.symbols.of(e):
-                    continue
-                tried += 1
+            for e in islice((e for e in entries if self.symbols.has(e, q)), TRIES):
                 a, b = self.base.of(e), shifted.of(e)
                 if a is not None and b is not None and abs(a[0] - b[0]) > ROUND_OFF * max(1.0, a[1], b[1]):
                     return True
