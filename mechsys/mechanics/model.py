@@ -10,7 +10,7 @@ from mechsys.mechanics.build import Body, Builder, Kinematics
 from mechsys.mechanics.dag import FreeSymbols
 from mechsys.mechanics.differentiate import Differentiator
 from mechsys.mechanics.kinematics import FrameState, rate_coefficients, time_derivative
-from mechsys.mechanics.products import gram, product
+from mechsys.mechanics.products import gram, nonzero, product
 from mechsys.model.load import T as TIME
 from mechsys.model.load import Document
 
@@ -67,7 +67,7 @@ class Sums:
 
     def add(self, mat: sp.Matrix) -> None:
         for k, e in enumerate(e for row in mat.tolist() for e in row):
-            if e != 0:
+            if nonzero(e):
                 self.terms[k].append(e)
 
     def matrix(self) -> sp.Matrix:

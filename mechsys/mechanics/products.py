@@ -8,14 +8,21 @@ same Mul of the same factors and Add of the same terms), for the finite expressi
 from __future__ import annotations
 
 from functools import cmp_to_key
+from operator import itemgetter
 
 import sympy as sp
 
-__all__ = ["product", "gram"]
+__all__ = ["product", "gram", "nonzero"]
+
+
+def nonzero(e: sp.Expr) -> bool:
+    """``e != 0`` without sympy's comparison for anything but a number (only a number equals 0 structurally;
+    the comparison of every term of a long chain's Kane sums cost as much as adding them)."""
+    return e is not sp.S.Zero and not (e.is_Number and e == 0)
 
 
 def _nonzero_rows(A: sp.MatrixBase) -> list[dict[int, sp.Expr]]:
-    return [{k: a for k, a in enumerate(row) if a != 0} for row in A.tolist()]
+    return [{k: a for k, a in enumerate(row) if nonzero(a)} for row in A.tolist()]
 
 
 def product(A: sp.MatrixBase, B: sp.MatrixBase) -> sp.Matrix:
@@ -40,7 +47,7 @@ def gram(J: sp.MatrixBase, scale: sp.Expr = sp.S.One) -> sp.Matrix:
     rows, n = J.shape
     entries = J.T.tolist()  # column by column
     scaled = entries if scale == 1 else (scale * J).T.tolist()
-    cols = [{x: scaled[i][x] for x in range(rows) if entries[i][x] != 0} for i in range(n)]
+    cols = [{x: scaled[i][x] for x in range(rows) if nonzero(entries[i][x])} for i in range(n)]
     plain = [{x: entries[i][x] for x in cols[i]} for i in range(n)]
     times = _Products([a for c in cols for a in c.values()] + [b for c in plain for b in c.values()])
     out = [[sp.S.Zero] * n for _ in range(n)]
@@ -71,12 +78,13 @@ class _Products:
         self.rank = {f: k for k, f in enumerate(sorted(plain, key=cmp_to_key(sp.Basic.compare)))}
 
     def __call__(self, a: sp.Expr, b: sp.Expr) -> sp.Expr:
-        fa, fb = sp.Mul.make_args(a), sp.Mul.make_args(b)
         rank = self.rank
-        if all(f in rank for f in fa) and all(f in rank for f in fb):
-            merged = sorted(fa + fb, key=rank.__getitem__)
-            if all(merged[k] != merged[k + 1] for k in range(len(merged) - 1)):
-                return sp.Mul._from_args(merged, True)
+        try:
+            merged = sorted([(rank[f], f) for f in sp.Mul.make_args(a) + sp.Mul.make_args(b)], key=itemgetter(0))
+        except KeyError:  # a factor that is not plain
+            return a * b
+        if all(merged[k][0] < merged[k + 1][0] for k in range(len(merged) - 1)):  # distinct (equal ones: one rank)
+            return sp.Mul._from_args([f for _, f in merged], True)
         return a * b
 
 
