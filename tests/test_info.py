@@ -148,6 +148,25 @@ def test_info_evaluates_m_and_a_without_code_and_says_what_compiled_code_says(na
     assert asdict_info(system_info(mechsys.load(ROOT / "systems" / f"{name}.yaml"))) == evaluated
 
 
+def test_a_mass_matrix_that_floating_point_does_not_evaluate_is_compiled(tmp_path, monkeypatch):
+    """A user's `max(...)` in a mass (Max is not an elementary function for dag.Evaluation): `info` compiles M
+    and A instead, and says what it says of the same model with the value written out."""
+    import mechsys.analysis.info as info
+
+    monkeypatch.setenv("MECHSYS_CACHE", "off")
+    text = (ROOT / "systems" / "double_pendulum.yaml").read_text()
+    with_max, plain = tmp_path / "with_max.yaml", tmp_path / "plain.yaml"
+    with_max.write_text(text.replace("    mass: m2\n", "    mass: max(m2, 0.5)\n"))
+    plain.write_text(text)
+    assert "max(m2, 0.5)" in with_max.read_text()
+    model = mechsys.load(with_max)
+    p = [model.parameters[s.name] for s in model.parameter_symbols]
+    assert info._evaluated(model, [(0.0, [0.1, 0.2], [0.0, 0.0])], p) is None
+    facts = asdict_info(system_info(model))
+    assert {k: v for k, v in facts.items() if k != "name"} == \
+        {k: v for k, v in asdict_info(system_info(mechsys.load(plain))).items() if k != "name"}
+
+
 def test_the_autonomy_decision_is_remembered_and_equals_a_fresh_one(tmp_path, monkeypatch):
     """MechanicalModel.is_autonomous scans the whole equations for t (half a second on the bicycle); the answer is
     stored per structure and parameter values. Stored equals fresh for a model without t, one whose prescribed
