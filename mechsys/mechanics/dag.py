@@ -75,7 +75,12 @@ class FreeSymbols:
     def _set(self, mask: int) -> frozenset:
         out = self._sets.get(mask)
         if out is None:
-            out = self._sets[mask] = frozenset(s for k, s in enumerate(self._symbols) if mask >> k & 1)
+            members, rest = [], mask
+            while rest:  # the set bits only (a generated program has thousands of symbols, a term a few)
+                low = rest & -rest
+                members.append(self._symbols[low.bit_length() - 1])
+                rest ^= low
+            out = self._sets[mask] = frozenset(members)
         return out
 
     def of(self, expr: sp.Basic) -> frozenset:
