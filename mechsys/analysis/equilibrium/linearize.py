@@ -10,7 +10,6 @@ import sympy as sp
 from mechsys.mechanics.dag import Substitution
 from mechsys.mechanics.model import INTERNAL_METHOD, MechanicalModel
 from mechsys.numeric import cache
-from mechsys.numeric.lambdify import generate_source
 from mechsys.numeric.runtime import function_from_source
 
 
@@ -30,22 +29,49 @@ class LinearPieces:
         key = cache.model_key(model, "linear-pieces")
         entry = cache.load(key)
         if not self._usable(entry):
-            exprs = []
-            layout = {}
-            blocks = self.blocks(INTERNAL_METHOD)
-            for name in self.KEYS:
-                mat = blocks[name]
-                layout[name] = [len(exprs), list(mat.shape)]
-                exprs += list(mat)
-            entry = {"layout": layout, "source": generate_source(exprs, args, light=True)}
+            source = self._forward(args)
+            layout, start = {}, 0
+            for name, shape in self._shapes().items():
+                layout[name] = [start, shape]
+                start += shape[0] * shape[1]
+            entry = {"layout": layout, "source": source}
             cache.store(key, entry)
         self.layout = {name: (int(start), tuple(shape)) for name, (start, shape) in entry["layout"].items()}
         self._fn = function_from_source(entry["source"])
 
+    def _shapes(self) -> dict[str, list[int]]:
+        n, m = self.n, self.m
+        return {"M": [n, n], "dfdq": [n, n], "dfdu": [n, n], "A": [m, n]}
+
+    def _forward(self, args: list) -> str:
+        """Python source returning M, df/dq, df/du and A (KEYS order, row by row) at t = 0 from Kane's equations
+        (INTERNAL_METHOD): one light CSE of f + A^T lambda, M and A, and the Jacobian by forward-mode
+        differentiation of its shared subexpressions (lambdify.differentiate_program), not sympy's derivatives of
+        whole entries CSE'd afterwards (the 20-link chain's equilibria: 5 s of its 11). df/du is the force's:
+        A does not depend on the rates (else the rows of f are differentiated apart)."""
+        from mechsys.numeric.lambdify import differentiate_program, shared_program, value_and_jacobian_sources
+
+        model, n = self.model, self.n
+        eq = model.equations(INTERNAL_METHOD)
+        at_t0 = Substitution({model.t: 0}, model.diff.symbols).matrix
+        force = at_t0(eq.f + (eq.A.T * sp.Matrix(self.lam) if self.m else sp.zeros(n, 1)))
+        apart = bool(self.m) and bool(model.diff.symbols.of_all(eq.A) & set(model.u))
+        rows = list(force) + (list(at_t0(eq.f)) if apart else [])
+        M, A = at_t0(eq.M), at_t0(eq.A)
+        program = differentiate_program(shared_program(rows + list(M) + list(A), args, [*model.q, *model.u],
+                                                       light=True), [*model.q, *model.u], len(rows))
+        J, w = program.jacobian, 2 * n
+        u_rows = n if apart else 0  # df/du from the rows of f
+        dfdq = [J[i * w + j] for i in range(n) for j in range(n)]
+        dfdu = [J[(u_rows + i) * w + n + j] for i in range(n) for j in range(n)]
+        outputs = program.outputs[len(rows):]
+        program.outputs = outputs[:n * n] + dfdq + dfdu + outputs[n * n:]
+        program.jacobian = []
+        return value_and_jacobian_sources((), args, (), program=program)[1]
+
     def _usable(self, entry: dict | None) -> bool:
         """A stored entry whose layout is this model's (every block in order, with its shape)."""
-        n, m = self.n, self.m
-        shapes = {"M": [n, n], "dfdq": [n, n], "dfdu": [n, n], "A": [m, n]}
+        shapes = self._shapes()
         try:
             layout, start = entry["layout"], 0
             for name in self.KEYS:
