@@ -47,24 +47,22 @@ class LinearPieces:
         """Python source returning M, df/dq, df/du and A (KEYS order, row by row) at t = 0 from Kane's equations
         (INTERNAL_METHOD): one light CSE of f + A^T lambda, M and A, and the Jacobian by forward-mode
         differentiation of its shared subexpressions (lambdify.differentiate_program), not sympy's derivatives of
-        whole entries CSE'd afterwards (the 20-link chain's equilibria: 5 s of its 11). df/du is the force's:
-        A does not depend on the rates (else the rows of f are differentiated apart)."""
+        whole entries CSE'd afterwards (the 40-link chain's blocks: 18.6 s instead of 39.5 s). df/du is the
+        force's: A, the coefficients of the rates in velocity constraints linear in them, does not contain them."""
         from mechsys.numeric.lambdify import differentiate_program, shared_program, value_and_jacobian_sources
 
         model, n = self.model, self.n
         eq = model.equations(INTERNAL_METHOD)
         at_t0 = Substitution({model.t: 0}, model.diff.symbols).matrix
         force = at_t0(eq.f + (eq.A.T * sp.Matrix(self.lam) if self.m else sp.zeros(n, 1)))
-        apart = bool(self.m) and bool(model.diff.symbols.of_all(eq.A) & set(model.u))
-        rows = list(force) + (list(at_t0(eq.f)) if apart else [])
         M, A = at_t0(eq.M), at_t0(eq.A)
-        program = differentiate_program(shared_program(rows + list(M) + list(A), args, [*model.q, *model.u],
-                                                       light=True), [*model.q, *model.u], len(rows))
+        wrt = [*model.q, *model.u]
+        program = differentiate_program(shared_program(list(force) + list(M) + list(A), args, wrt, light=True),
+                                        wrt, n)
         J, w = program.jacobian, 2 * n
-        u_rows = n if apart else 0  # df/du from the rows of f
         dfdq = [J[i * w + j] for i in range(n) for j in range(n)]
-        dfdu = [J[(u_rows + i) * w + n + j] for i in range(n) for j in range(n)]
-        outputs = program.outputs[len(rows):]
+        dfdu = [J[i * w + n + j] for i in range(n) for j in range(n)]
+        outputs = program.outputs[n:]
         program.outputs = outputs[:n * n] + dfdq + dfdu + outputs[n * n:]
         program.jacobian = []
         return value_and_jacobian_sources((), args, (), program=program)[1]
