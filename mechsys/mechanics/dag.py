@@ -163,7 +163,6 @@ class Evaluation:
                  changed: frozenset = frozenset(), free: FreeSymbols | None = None) -> None:
         self.values = values
         self.base = base
-        self.changed = changed
         self.free = free if free is not None else (base.free if base is not None else FreeSymbols())
         self._changed = self.free.bits(changed)
         self._memo: dict[int, tuple[sp.Basic, Optional[tuple[float, float]]]] = {}
