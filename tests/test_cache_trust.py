@@ -262,12 +262,36 @@ def test_sweep_model_copies_live_in_a_private_folder(tmp_path):
 
 
 def test_the_arithmetic_check_allows_what_sympy_prints_and_nothing_else():
+    import sympy as sp
+
+    from mechsys.numeric.lambdify import generate_source
     from mechsys.numeric.runtime import check_source, function_from_source
 
-    fn = function_from_source("def _f(a0):\n    return [float('nan'), float('-inf'), (1.0 if False else a0)]")
-    out = fn(2.0)
-    assert math.isnan(out[0]) and out[1] == -math.inf and out[2] == 2.0
+    x = sp.Symbol("x")
+    printed = generate_source([sp.nan, -sp.oo, sp.oo, sp.Piecewise((x, x > 0), (-x, True)), sp.Max(x, 1) + sp.Abs(x),
+                               sp.sign(x) * sp.sqrt(x**2 + 1) / sp.pi, sp.atan2(x, 2) ** sp.Rational(3, 2),
+                               sp.Float(2.5) * x - 3], [x])
+    out = function_from_source(printed)(-2.0)
+    assert math.isnan(out[0]) and out[1] == -math.inf and out[2] == math.inf and out[3] == 2.0
+    assert out[4] == 3.0 and out[5] == pytest.approx(-math.sqrt(5) / math.pi) and out[7] == -8.0
+    fn = function_from_source("def _f(a0):\n    return [1.0 if a0 > 0 and a0 < 3 or not a0 else -a0, (1, 2.0)]")
+    assert fn(2.0) == [1.0, (1, 2.0)] and fn(4.0) == [-4.0, (1, 2.0)]
     for bad in ["def _f(a0):\n    return [float('1e5')]", "def _f(a0):\n    return [abs('x')]",
-                "def _f(a0):\n    return [getattr(a0, 'real')]", "def _f(a0):\n    return [math.__loader__]"]:
+                "def _f(a0):\n    return [float('nan')]", "def _f(a0):\n    return [b'x']",
+                "def _f(a0):\n    return [getattr(a0, 'real')]", "def _f(a0):\n    return [math.__loader__]",
+                "def _f(a0):\n    return [a0.real]", "def _f(a0):\n    return [a0[0]]", "def _f(a0):\n    return [1j]",
+                "def _f(a0):\n    return [f(a0)]", "def _f(a0):\n    return [abs(a0, key=1)]",
+                "def _f(a0):\n    global g\n    g = 1\n    return [a0]", "def _f(a0):\n    a0.x = 1\n    return [a0]",
+                "def _f(a0):\n    import os\n    return [a0]", "def _f(a0):\n    from math import sin\n    return [a0]",
+                "def _f(a0):\n    while a0:\n        pass\n    return [a0]",
+                "def _f(a0):\n    return [x for x in (1, 2)]", "def _f(a0):\n    return [lambda: 1]",
+                "def _f(a0):\n    return [a0 in (1, 2)]", "def _f(a0):\n    return [a0 is None]",
+                "def _f(a0):\n    yield a0", "def _f(*a):\n    return [1]", "def _f(a0, *, k):\n    return [1]",
+                "def _f(a0=math):\n    return [a0]", "def _f(a0: int):\n    return [a0]",
+                "@abs\ndef _f(a0):\n    return [a0]", "def _g(a0):\n    return [a0]",
+                "def _f(a0):\n    return [a0]\nx = 1", "import os\ndef _f(a0):\n    return [a0]",
+                "def _f(a0):\n    def h():\n        return a0\n    return [h]", "def _f(a0):\n    del a0\n    return [1]",
+                "def _f(a0):\n    return [{a0: 1}]", "def _f(a0):\n    return [{a0}]",
+                "def _f(a0):\n    return [__import__('os')]", "def _f(a0):\n    return [math.sin.__self__]"]:
         with pytest.raises(ValueError):
             check_source(bad)

@@ -80,6 +80,9 @@ class _Printer(PythonCodePrinter):
         value = float(expr)
         return f"({value!r})" if math.isfinite(value) else super()._print_Float(expr)
 
+    def _print_NegativeInfinity(self, expr: sp.Expr) -> str:
+        return "(-math.inf)"  # sympy's float('-inf'): generated code holds no strings (runtime.check_source)
+
     def _print_DiracDelta(self, expr: sp.Expr) -> str:
         # derivative of sign(x) in |x| (e.g. a 1-D spring length): zero except at the singular point itself
         return "0.0"
