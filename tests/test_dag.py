@@ -1,6 +1,7 @@
 """mechanics/dag.py: the free symbols of expression DAGs, each shared subexpression visited once, equal sympy's
 free_symbols on derived equations, on random expressions with bound variables and conditions, and on trees deeper
-than Python's recursion limit; Substitution equals xreplace, rebuilding each shared subexpression once."""
+than Python's recursion limit; Substitution equals xreplace, rebuilding each shared subexpression once; the
+Interner gives equal expressions with one object per value, printed as the originals."""
 from __future__ import annotations
 
 import random
@@ -9,8 +10,8 @@ import pytest
 import sympy as sp
 
 import mechsys
-from helpers import SYSTEMS_DIR
-from mechsys.mechanics.dag import FreeSymbols, Substitution
+from helpers import DATA_DIR, SYSTEMS_DIR
+from mechsys.mechanics.dag import FreeSymbols, Interner, Substitution
 
 
 @pytest.mark.parametrize("name", ["bicycle", "rolling_disk", "indicator", "four_bar"])
@@ -88,3 +89,80 @@ def test_a_tree_deeper_than_the_recursion_limit():
     for k in range(5000):
         e = sp.Add(sp.Mul(e, sp.Symbol(f"c{k % 7}"), evaluate=False), sp.Integer(1), evaluate=False)
     assert FreeSymbols().of(e) == {x} | {sp.Symbol(f"c{k}") for k in range(7)}
+
+
+def _objects_and_values(exprs: list) -> tuple[int, int]:
+    """(distinct objects, distinct values) among the nodes of the expressions."""
+    seen: dict[int, sp.Basic] = {}
+    stack = list(exprs)
+    while stack:
+        node = stack.pop()
+        if id(node) not in seen:
+            seen[id(node)] = node
+            stack.extend(node.args)
+    return len(seen), len(set(seen.values()))
+
+
+@pytest.mark.parametrize("path", [SYSTEMS_DIR / "bicycle.yaml", SYSTEMS_DIR / "double_pendulum.yaml",
+                                  SYSTEMS_DIR / "indicator.yaml", DATA_DIR / "beyond" / "top_zxz.yaml",
+                                  DATA_DIR / "beyond" / "furuta_rod_arm.yaml"])
+def test_interned_equations_are_the_same_with_one_object_per_value(path):
+    from mechsys.report.printing import to_text
+
+    model = mechsys.load(path)
+    for method in ("lagrange", "kane"):
+        eq = model.equations(method)
+        one = eq.interned()
+        before = [e for m in (eq.M, eq.f, eq.Q, eq.A, eq.b) for e in m] + [eq.T, eq.V]
+        after = [e for m in (one.M, one.f, one.Q, one.A, one.b) for e in m] + [one.T, one.V]
+        assert len(before) == len(after)
+        for b, a in zip(before, after):
+            assert a == b and sp.srepr(a) == sp.srepr(b) and to_text(a) == to_text(b)
+        objects, values = _objects_and_values(after)
+        assert objects == values
+
+
+def test_equal_expressions_built_apart_become_one_object():
+    from sympy.core.cache import clear_cache
+
+    x, y, l = sp.symbols("x y l")
+    rows = []
+    for _ in range(2):
+        clear_cache()  # else sympy's cache gives back the first row's objects
+        rows.append([l * sp.cos(x + y) + sp.Max(x, l) * sp.Abs(y), sp.Piecewise((x, y > 0), (l, True)) + x**2])
+    assert rows[0][0] is not rows[1][0] and rows[0][0].args[0] is not rows[1][0].args[0]
+    one = Interner()
+    got = [[one.of(e) for e in r] for r in rows]
+    assert got[0][0] is got[1][0] and got[0][1] is got[1][1]
+    assert got[0] == rows[0]
+    objects, values = _objects_and_values([e for r in got for e in r])
+    assert objects == values
+
+
+def test_random_expressions_intern_to_themselves():
+    from sympy.core.cache import clear_cache
+
+    rng = random.Random(11)
+    syms = sp.symbols("a b c d")
+    makers = [lambda u, v: u + v, lambda u, v: u * v, lambda u, v: u ** 2 - v, lambda u, v: sp.sin(u) * sp.cos(v),
+              lambda u, v: sp.sqrt(u ** 2 + v ** 2), lambda u, v: sp.atan2(u, v) + sp.exp(-u),
+              lambda u, v: sp.Rational(3, 7) * u - sp.Float(0.25) * v, lambda u, v: sp.Max(u, v) + sp.Abs(u - v)]
+    for _ in range(40):
+        pool = list(syms)
+        for _ in range(30):
+            pool.append(rng.choice(makers)(rng.choice(pool), rng.choice(pool)))
+        clear_cache()  # equal expressions, other objects
+        copies = [sp.sympify(sp.srepr(e)) for e in pool[-10:]]
+        assert any(c is not e for c, e in zip(copies, pool[-10:]))
+        one = Interner()
+        got = [one.of(e) for e in pool[-10:] + copies]
+        assert got[:10] == pool[-10:] and all(a is b for a, b in zip(got[:10], got[10:]))
+        assert all(sp.srepr(a) == sp.srepr(b) for a, b in zip(got, pool[-10:] + copies))
+
+
+def test_interning_a_tree_deeper_than_the_recursion_limit():
+    x = sp.Symbol("x")
+    e = x
+    for k in range(5000):
+        e = sp.Add(sp.Mul(e, sp.Symbol(f"c{k % 7}"), evaluate=False), sp.Integer(1), evaluate=False)
+    assert Interner().of(e) == e

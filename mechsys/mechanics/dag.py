@@ -223,3 +223,65 @@ def _apply(node: sp.Basic, args: list[tuple[float, float]]) -> Optional[tuple[fl
     if not math.isfinite(result):
         return None
     return result, max(abs(result), *(a[1] for a in args))
+
+
+#: nodes rebuilt over interned arguments: sums and products as they are (no evaluation), powers and these
+#: functions unevaluated; a node of another kind is kept as it is (one object per value still, its arguments
+#: those it was built with)
+_RAW = (sp.Add, sp.Mul)
+_FUNCTIONS = (sp.sin, sp.cos, sp.tan, sp.exp, sp.log, sp.Abs, sp.sign, sp.atan2, sp.asin, sp.acos, sp.atan, sp.sinh,
+              sp.cosh, sp.tanh)
+
+
+class Interner:
+    """One object per value across the expressions it is given: derived equations hold many equal subexpressions
+    built apart (the 80-link chain's printed equations: 548,521 objects, 222,329 distinct values). Whatever keys
+    them by value (the printers' census and names) compares two such objects through their whole trees, and
+    whatever keys them by object (the printers' memo) works once per copy; over interned expressions an equal
+    pair is one object, and equality stops at the first shared argument. Each node is rebuilt over its interned
+    arguments, to the same value (sums and products from their arguments as they are, powers and elementary
+    functions unevaluated; a node of another kind is kept with the arguments it was built with). The expressions
+    given must stay alive while the Interner is used (it remembers nodes by identity)."""
+
+    def __init__(self) -> None:
+        self._canon: dict[sp.Basic, sp.Basic] = {}
+        self._memo: dict[int, sp.Basic] = {}  # id(node) -> its interned object
+
+    def of(self, expr: sp.Basic) -> sp.Basic:
+        """The interned object equal to ``expr``."""
+        memo, canon = self._memo, self._canon
+        stack = [(expr, False)]
+        while stack:
+            node, ready = stack.pop()
+            if id(node) in memo:
+                continue
+            args = node.args
+            if not args:
+                memo[id(node)] = canon.setdefault(node, node)
+            elif not ready:  # its arguments first (iterative: the trees of long chains are deeper than the stack)
+                stack.append((node, True))
+                stack.extend([(a, False) for a in args if id(a) not in memo])
+            else:
+                new = [memo[id(a)] for a in args]
+                key = node
+                if any(n is not a for n, a in zip(new, args)):
+                    key = self._rebuilt(node, new)
+                memo[id(node)] = canon.setdefault(key, key)
+        return memo[id(expr)]
+
+    def matrix(self, m: sp.MatrixBase) -> sp.Matrix:
+        return sp.Matrix(m.shape[0], m.shape[1], [self.of(e) for e in m])
+
+    def _rebuilt(self, node: sp.Basic, args: list[sp.Basic]) -> sp.Basic:
+        """``node`` over the interned ``args`` (equal to its own), built as its constructor builds it unevaluated
+        but not through sympy's cache, which would give back an equal node over other argument objects."""
+        if isinstance(node, _RAW):
+            return node._new_rawargs(*args)
+        if type(node) is sp.Pow:  # Pow.__new__ unevaluated: Expr.__new__, then its commutativity
+            out = sp.Expr.__new__(sp.Pow, *args)
+            out.is_commutative = args[0].is_commutative and args[1].is_commutative
+            return out
+        hit = self._canon.get(node)  # a function: the value met before, else built (cached constructors)
+        if hit is not None:
+            return hit
+        return node.func(*args, evaluate=False) if type(node) in _FUNCTIONS else node

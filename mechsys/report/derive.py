@@ -231,6 +231,7 @@ def _note(note: str, fmt: str) -> str:
 
 
 def _named_or_inline(eq: Equations, name: str, fmt: str, extra: dict | None, raw: bool, subexpressions: str) -> str:
+    eq = eq.interned()  # the printers' memo, census and names meet each value once
     with shared_subexpressions():
         write = _writer(eq, name, fmt, extra, tidy=fmt != "json" and not raw)
         if subexpressions == "inline" or (subexpressions == "auto" and fmt == "json"):
