@@ -313,11 +313,13 @@ def emit_tables(tables, fmt: "TableFormat", output: Optional[Path], payload: dic
         return
     from rich.console import Console
 
+    # crop=False: a long table's rows are whole lines wider than the console (tables.to_rich); rich's own tables
+    # fit its width anyway
     if output is None:
-        Console().print(rendered)
+        Console().print(rendered, crop=False)
     else:
         console = Console(record=True, width=160, file=open(os.devnull, "w"))
-        console.print(rendered)
+        console.print(rendered, crop=False)
         write_atomic(output, console.export_text())
 
 

@@ -296,6 +296,24 @@ def test_a_long_table_prints_as_aligned_text_with_every_row():
     assert lines[-2].split() == ["1", "30.4", "-7.728829e-15"]
 
 
+@pytest.mark.parametrize("to_file", [False, True])
+def test_a_long_wide_table_keeps_one_line_per_row_on_a_narrow_console(capsys, monkeypatch, tmp_path, to_file):
+    """Rows wider than the console (stdout piped: 80 columns; a file: 160) stay whole lines, neither folded into
+    fragments nor cut (the 20-link chain's equilibria: 38,576 lines of fragments for 504 rows)."""
+    from mechsys.cli import TableFormat, emit_tables
+    from mechsys.report.tables import LONG_TABLE, Table
+
+    monkeypatch.setenv("COLUMNS", "80")
+    t = Table("equilibria", ["#", "coordinates", "stability"])
+    for k in range(LONG_TABLE + 1):
+        t.add(k + 1, [round(0.001 * k * j, 6) for j in range(30)], "an eigenvalue has a positive real part")
+    out = tmp_path / "table.txt"
+    emit_tables([t], TableFormat.text, out if to_file else None)
+    lines = (out.read_text() if to_file else capsys.readouterr().out).splitlines()
+    assert len(lines) == 3 + LONG_TABLE + 1 and max(len(line) for line in lines) > 200
+    assert lines[-1].startswith(f"{LONG_TABLE + 1}  [") and lines[-1].endswith("an eigenvalue has a positive real part")
+
+
 def test_a_parameter_the_residual_does_not_read_has_an_exact_zero_derivative():
     """The bicycle's speed v sets only the given rates: its generated residual reads no v, so dE/dv (what a
     speed sweep's predictor asks for) is returned as zeros without evaluating E, exactly what the central
