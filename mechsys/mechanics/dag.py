@@ -250,23 +250,33 @@ class Interner:
     def of(self, expr: sp.Basic) -> sp.Basic:
         """The interned object equal to ``expr``."""
         memo, canon = self._memo, self._canon
-        stack = [(expr, False)]
+        stack = [expr]  # iterative: the trees of long chains are deeper than Python's stack
+        pop, push = stack.pop, stack.append
         while stack:
-            node, ready = stack.pop()
+            node = stack[-1]
             if id(node) in memo:
+                pop()
                 continue
             args = node.args
             if not args:
                 memo[id(node)] = canon.setdefault(node, node)
-            elif not ready:  # its arguments first (iterative: the trees of long chains are deeper than the stack)
-                stack.append((node, True))
-                stack.extend([(a, False) for a in args if id(a) not in memo])
-            else:
-                new = [memo[id(a)] for a in args]
-                key = node
-                if any(n is not a for n, a in zip(new, args)):
+                pop()
+                continue
+            waiting = False  # its arguments first
+            for a in args:
+                if id(a) not in memo:
+                    push(a)
+                    waiting = True
+            if waiting:
+                continue
+            pop()
+            new = [memo[id(a)] for a in args]
+            key = node
+            for n, a in zip(new, args):
+                if n is not a:
                     key = self._rebuilt(node, new)
-                memo[id(node)] = canon.setdefault(key, key)
+                    break
+            memo[id(node)] = canon.setdefault(key, key)
         return memo[id(expr)]
 
     def matrix(self, m: sp.MatrixBase) -> sp.Matrix:
