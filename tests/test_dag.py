@@ -139,6 +139,21 @@ def test_equal_expressions_built_apart_become_one_object():
     assert objects == values
 
 
+def test_sympys_constructor_cache_does_not_hand_back_other_argument_objects():
+    """A function rebuilt over an interned argument is not taken from sympy's cache, where an equal function may be
+    kept over another object of the same value (built by an earlier Interner: a CI run's test order)."""
+    x, y = sp.symbols("x y")
+    a, b, c = (sp.Add._from_args((x, y)) for _ in range(3))  # three objects of one value
+    kept = sp.cos(c, evaluate=False)  # sympy's cache now holds cos over c
+    own = sp.Basic.__new__(sp.cos, b)
+    own.nargs = kept.nargs
+    expr = sp.Mul._from_args((own, a))  # cos(x + y)*(x + y), built apart: a is interned first, then cos over it
+    got = Interner().of(expr)
+    assert got == expr and sp.srepr(got) == sp.srepr(expr)
+    objects, values = _objects_and_values([got])
+    assert objects == values and got.args[0] is not kept and got.args[0].args[0] is got.args[1]
+
+
 def test_random_expressions_intern_to_themselves():
     from sympy.core.cache import clear_cache
 

@@ -240,8 +240,10 @@ class Interner:
     whatever keys them by object (the printers' memo) works once per copy; over interned expressions an equal
     pair is one object, and equality stops at the first shared argument. Each node is rebuilt over its interned
     arguments, to the same value (sums and products from their arguments as they are, powers and elementary
-    functions unevaluated; a node of another kind is kept with the arguments it was built with). The expressions
-    given must stay alive while the Interner is used (it remembers nodes by identity)."""
+    functions as their constructors build them unevaluated; a node of another kind is kept with the arguments it
+    was built with), never through sympy's constructor cache, which may hold an equal node over other argument
+    objects (an earlier Interner's: a CI run's test order left two copies). The expressions given must stay alive
+    while the Interner is used (it remembers nodes by identity)."""
 
     def __init__(self) -> None:
         self._canon: dict[sp.Basic, sp.Basic] = {}
@@ -291,7 +293,10 @@ class Interner:
             out = sp.Expr.__new__(sp.Pow, *args)
             out.is_commutative = args[0].is_commutative and args[1].is_commutative
             return out
-        hit = self._canon.get(node)  # a function: the value met before, else built (cached constructors)
-        if hit is not None:
-            return hit
-        return node.func(*args, evaluate=False) if type(node) in _FUNCTIONS else node
+        if type(node) in _FUNCTIONS and "nargs" in getattr(node, "__dict__", ()):
+            # Application.__new__ unevaluated: Basic.__new__, then the instance's nargs (the same class and
+            # number of arguments: the same nargs)
+            out = sp.Basic.__new__(type(node), *args)
+            out.nargs = node.nargs
+            return out
+        return node
