@@ -94,7 +94,17 @@ class FreeSymbols:
         return self._set(mask)
 
 
-class Substitution:
+class _PerEntry:
+    """A map of expressions (``of``) applied to a matrix entry by entry."""
+
+    def of(self, expr: sp.Basic) -> sp.Basic:
+        raise NotImplementedError
+
+    def matrix(self, mat: sp.MatrixBase) -> sp.Matrix:
+        return sp.Matrix(mat.shape[0], mat.shape[1], [self.of(e) for e in mat])
+
+
+class Substitution(_PerEntry):
     """``of(expr)``: ``expr.xreplace(mapping)`` for a mapping of symbols, each subexpression object rebuilt once
     (sympy's xreplace walks every path of a DAG: 6 s of the 20-link chain's linearization blocks, for a t = 0 that
     does not occur). Nodes without a replaced symbol are returned as they are; the others are rebuilt with
@@ -131,9 +141,6 @@ class Substitution:
     def _known(self, node: sp.Basic) -> sp.Basic | None:
         hit = self._memo.get(id(node))
         return hit[1] if hit is not None and hit[0] is node else None
-
-    def matrix(self, mat: sp.MatrixBase) -> sp.Matrix:
-        return sp.Matrix(mat.shape[0], mat.shape[1], [self.of(e) for e in mat])
 
 
 #: the functions value() evaluates, by sympy type
@@ -229,11 +236,10 @@ def _apply(node: sp.Basic, args: list[tuple[float, float]]) -> Optional[tuple[fl
 #: functions unevaluated; a node of another kind is kept as it is (one object per value still, its arguments
 #: those it was built with)
 _RAW = (sp.Add, sp.Mul)
-_FUNCTIONS = (sp.sin, sp.cos, sp.tan, sp.exp, sp.log, sp.Abs, sp.sign, sp.atan2, sp.asin, sp.acos, sp.atan, sp.sinh,
-              sp.cosh, sp.tanh)
+_FUNCTIONS = frozenset(_MATH) | {sp.atan2}
 
 
-class Interner:
+class Interner(_PerEntry):
     """One object per value across the expressions it is given: derived equations hold many equal subexpressions
     built apart (the 80-link chain's printed equations: 548,521 objects, 222,329 distinct values). Whatever keys
     them by value (the printers' census and names) compares two such objects through their whole trees, and
@@ -280,9 +286,6 @@ class Interner:
                     break
             memo[id(node)] = canon.setdefault(key, key)
         return memo[id(expr)]
-
-    def matrix(self, m: sp.MatrixBase) -> sp.Matrix:
-        return sp.Matrix(m.shape[0], m.shape[1], [self.of(e) for e in m])
 
     def _rebuilt(self, node: sp.Basic, args: list[sp.Basic]) -> sp.Basic:
         """``node`` over the interned ``args`` (equal to its own), built as its constructor builds it unevaluated
