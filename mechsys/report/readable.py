@@ -188,13 +188,24 @@ def _tidy_factor(factor: sp.Expr) -> tuple[sp.Expr, sp.Expr] | None:
         return None
     if negative:
         content = -content
-    return content ** exp, _divided(base, split, content) ** exp
+    divided = _divided(base, split, content)
+    return (content, divided) if exp is sp.S.One else (content ** exp, divided ** exp)
 
 
 def _divided(base: sp.Expr, split: list[tuple[sp.Expr, sp.Expr]], number: sp.Expr) -> sp.Expr:
     """The sum divided by a number that divides its rational coefficients: no term merges with another, so the
     terms are only re-sorted, as sympy's Add.primitive does (a full Add() costs far more on big sums)."""
-    terms = [_keep_coeff(c / number, rest) for c, rest in split]
+    quotients: dict[sp.Expr, sp.Expr] = {}  # a sum's coefficients repeat (a chain's: 1, 1/2, their negatives)
+    terms = []
+    for c, rest in split:
+        q = quotients.get(c)
+        if q is None:
+            q = quotients[c] = c / number
+        if rest.is_Mul and q is not sp.S.One and q is not sp.S.NegativeOne:
+            # what _keep_coeff builds (rest has no numeric factor), its commutativity known: rest's
+            terms.append(sp.Mul._from_args((q, *rest.args), rest.is_commutative))
+        else:
+            terms.append(_keep_coeff(q, rest))
     first = terms.pop(0) if terms[0].is_Number else None
     _addsort(terms)
     return base._new_rawargs(*([first] if first is not None else []), *terms)
