@@ -8,7 +8,7 @@ import pytest
 import sympy as sp
 
 from mechsys.mechanics.kinematics import rate_coefficients
-from mechsys.mechanics.products import gram, product
+from mechsys.mechanics.products import gram, product, sums
 
 q1, q2, q3, a, b, c, m = sp.symbols("q1 q2 q3 a b c m")
 u1, u2, u3 = sp.symbols("u1 u2 u3")
@@ -132,3 +132,75 @@ def test_gram_of_a_chains_sums_is_sympys_product():
     for i in range(8):
         for j in range(i, 8):
             assert got[i, j] == want[i, j] and got[i, j].args == want[i, j].args
+
+
+def _same(got: sp.Expr, want: sp.Expr) -> bool:
+    return got == want and got.args == want.args
+
+
+def test_sums_are_adds_with_their_args_in_order():
+    """Groups drawn from one pool (a chain's rate coefficients: suffixes of one sum), and groups the one-sort path
+    must leave to Add: terms Add collects (x and 2*x), numbers, sums, powers of numbers, a noncommutative term,
+    an infinity, a single term, an empty group."""
+    qs = sp.symbols("x1:9")
+    l = sp.Symbol("l")
+    pool = [l * sp.cos(sum(qs[:k + 1])) for k in range(8)] + [sp.sin(qs[0]), qs[1] ** 2, -qs[2] / 2]
+    groups = [pool[k:] for k in range(len(pool))] + [pool[::-1], pool[::2]]
+    A = sp.Symbol("A", commutative=False)
+    odd = [[a, 2 * a, b], [a, sp.Integer(3), b], [a, b + c, c], [sp.sqrt(2), a, b], [A, a, b], [sp.zoo, a, b],
+           [a * b, -a * b / 2, c], [a], [], [a, sp.sin(a), sp.cos(a) * b, b]]
+    rng = random.Random(3)
+    mixed = [[rng.choice(pool + [a, b, 2 * a]) for _ in range(rng.randrange(1, 8))] for _ in range(40)]
+    for batch in (groups, odd, groups + odd, mixed):
+        got = sums([list(g) for g in batch])
+        for g, e in zip(batch, got):
+            assert _same(e, sp.Add(*g)), g
+
+
+@pytest.mark.parametrize("path", [p for p in _models() if p.stem in ("bicycle", "double_pendulum", "four_bar",
+                                                                     "rolling_disk", "gyrostabilizer")],
+                         ids=lambda p: p.stem)
+def test_rate_coefficients_of_models_take_adds_in_sympys_order(path, monkeypatch):
+    """Every sum the rate-coefficient walk builds through the one-sort path is the very Add sympy builds."""
+    import mechsys
+    from mechsys.mechanics import kinematics
+
+    calls = []
+
+    def checked(groups):
+        got = sums(groups)
+        for g, e in zip(groups, got):
+            assert _same(e, sp.Add(*g))
+        calls.append(len(groups))
+        return got
+
+    monkeypatch.setattr(kinematics, "sums", checked)
+    model = mechsys.load(path)
+    assert model._body_partials and calls
+
+
+def test_rate_coefficients_of_a_spatial_chain_equal_sympys_jacobian(tmp_path):
+    """A 10-link spatial chain written as a user would (joints about z and y in turn, rods along x): the walk's
+    coefficients, one sort per shared sum, are the Jacobian of the velocities by sympy's differentiation, and
+    every sum they hold is in Add's order."""
+    import mechsys
+
+    lines = ["name: spatial_chain", "parameters: {m: 1.0, l: 0.5, g: 9.81}", "coordinates:"]
+    lines += [f"  q{k}: {{initial: 0.1, rate: 0}}" for k in range(1, 11)]
+    lines += ["links:"]
+    for k in range(1, 11):
+        parent, origin = ("ground", "[0, 0, 0]") if k == 1 else (f"rod{k - 1}", "[l, 0, 0]")
+        lines += [f"  rod{k}:",
+                  f"    joint: {{type: revolute, parent: {parent}, axis: {'zy'[k % 2]}, coordinate: q{k}, "
+                  f"origin: {origin}}}",
+                  "    mass: m", "    center_of_mass: [l/2, 0, 0]", "    shape: {rod: {length: l, axis: x}}"]
+    lines += ["forces:", "  - {type: gravity, acceleration: [0, 0, -g]}"]
+    path = tmp_path / "spatial_chain.yaml"
+    path.write_text("\n".join(lines) + "\n")
+    model = mechsys.load(path)
+    for (body, _r, v, w, _frame), (Jv, Jw) in zip(model._body_kinematics, model._body_partials):
+        for got, want in ((Jv, v.jacobian(model.u)), (Jw, w.jacobian(model.u))):
+            assert sp.expand(got - want) == sp.zeros(*got.shape), body.name
+            for e in got:
+                if e.is_Add:
+                    assert _same(e, sp.Add(*e.args))

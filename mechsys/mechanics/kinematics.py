@@ -6,7 +6,7 @@ from typing import Any, Callable, Sequence
 
 import sympy as sp
 
-from mechsys.mechanics.products import product
+from mechsys.mechanics.products import product, sums
 
 AXES = {
     "x": (1, 0, 0), "y": (0, 1, 0), "z": (0, 0, 1),
@@ -197,7 +197,7 @@ class _RateSplit:
             for part in parts:
                 for j, c in part.items():
                     terms.setdefault(j, []).append(c)
-            return {j: sp.Add(*t) for j, t in terms.items()}
+            return dict(zip(terms, sums(list(terms.values()))))
         if e.is_Mul:
             moving = [k for k, part in enumerate(parts) if part]
             if len(moving) > 1:

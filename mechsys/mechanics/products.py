@@ -12,7 +12,7 @@ from operator import itemgetter
 
 import sympy as sp
 
-__all__ = ["product", "gram", "nonzero"]
+__all__ = ["product", "gram", "nonzero", "sums"]
 
 
 def nonzero(e: sp.Expr) -> bool:
@@ -91,3 +91,40 @@ class _Products:
 def _plain(f: sp.Expr) -> bool:
     """A factor that Mul keeps as it is next to other such factors (no coefficient, power or exp to merge)."""
     return (f.is_Add or f.is_Symbol or f.is_Function and not isinstance(f, sp.exp)) and f.is_commutative
+
+
+def sums(groups: list[list[sp.Expr]]) -> list[sp.Expr]:
+    """sp.Add(*group) for each group, with one sort for all of them where that is safe.
+
+    Add sorts its terms with Basic.compare. Groups drawn from one pool of terms (the coefficients of each rate in
+    a chain's velocity: the same n terms, a suffix of them per rate) sort the same terms again and again. When
+    a group's terms are commutative products, symbols or functions (no numbers, sums or powers of numbers,
+    nothing Add rebuilds) whose parts without a numeric coefficient are distinct (nothing Add collects), its
+    sum is those terms in Add's order, and that order is read from one sort of all the groups' terms (a total
+    order). Otherwise Add builds it. The result is the same expression, args in the same order."""
+    pool: dict[sp.Expr, None] = {}
+    for group in groups:
+        for t in group:
+            pool.setdefault(t, None)
+    if sum(len(g) for g in groups) <= len(pool) + 1:  # nothing shared: Add's own sort costs no more
+        return [sp.Add(*g) for g in groups]
+    plain = [t for t in pool if _plain_term(t)]
+    rank = {t: k for k, t in enumerate(sorted(plain, key=cmp_to_key(sp.Basic.compare)))}
+    return [_ranked_sum(g, rank) for g in groups]
+
+
+def _ranked_sum(group: list[sp.Expr], rank: dict[sp.Expr, int]) -> sp.Expr:
+    if len(group) < 2 or any(t not in rank for t in group):
+        return sp.Add(*group)
+    rests = {t.as_coeff_Mul()[1] for t in group}
+    if len(rests) < len(group):  # two terms Add would collect
+        return sp.Add(*group)
+    return sp.Add._from_args(sorted(group, key=rank.__getitem__), True)
+
+
+def _plain_term(t: sp.Expr) -> bool:
+    """A term that Add keeps as it is next to other such terms (given their parts without a coefficient are
+    distinct): a commutative product, symbol, function or power of something but a number."""
+    if not (t.is_Mul or t.is_Symbol or t.is_Function or t.is_Pow and not t.base.is_Number):
+        return False
+    return t.is_commutative is True
