@@ -58,9 +58,10 @@ def _encode(e: sp.Basic, index: dict, symbols: Mapping[str, sp.Symbol]) -> list:
         if symbols.get(e.name) is not e and symbols.get(e.name) != e:
             raise Unsupported(f"symbol {e.name!r} is not one of the model's")
         return ["S", e.name]
-    for name, value in CONSTANTS.items():
-        if not e.args and e == value or e is value:
-            return ["C", name]
+    if not e.args:  # the constants are atoms
+        for name, value in CONSTANTS.items():
+            if e == value:
+                return ["C", name]
     if isinstance(e, sp.Integer):
         return ["I", str(int(e))]
     if isinstance(e, sp.Rational):
