@@ -1,10 +1,10 @@
 """Turn a validated document into kinematics: link frames, bodies, points, load and constraint elements."""
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Any
 
-import numpy as np
 import sympy as sp
 
 from mechsys.mechanics.dag import value as dag_value
@@ -102,7 +102,7 @@ class Builder:
             val = complex(sp.sympify(expr).xreplace(values).evalf())
         except (TypeError, ValueError, ZeroDivisionError):
             raise self.doc.error(path, "does not evaluate to a number") from None
-        if abs(val.imag) > 1e-12 * max(1.0, abs(val.real)) or not np.isfinite(val.real):
+        if abs(val.imag) > 1e-12 * max(1.0, abs(val.real)) or not math.isfinite(val.real):
             raise self.doc.error(path, "must evaluate to a finite real number")
         if nonnegative and val.real < 0:
             raise self.doc.error(path, "must not be negative")
