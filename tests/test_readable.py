@@ -421,3 +421,23 @@ def test_a_stored_clean_up_holds_only_the_entries_it_changed(tmp_path, monkeypat
                                budget=100)
     assert entries(again.equations) == entries(fresh.equations)
     assert (again.entries, again.left_as_derived, again.spent) == (fresh.entries, fresh.left_as_derived, fresh.spent)
+
+
+def test_a_sum_divided_by_its_content_is_the_sum_sympy_builds():
+    """_divided builds the divided sum's terms itself (each coefficient divided once, products assembled directly)
+    and only re-sorts them: the result must be the very Add of the divided terms (args in order), for rational and
+    float coefficients, terms with and without a product, a numeric term, and divisions to 1 and -1."""
+    x, y, z, l = sp.symbols("x y z l")
+    rng = random.Random(7)
+    parts = [x, l * sp.cos(x), l * sp.sin(x + y) * z, sp.cos(y) ** 2, y * z, sp.sin(z)]
+    coefficients = [sp.Integer(1), sp.Integer(-1), sp.Rational(1, 2), sp.Rational(-1, 2), sp.Integer(2),
+                    sp.Rational(-3, 4), sp.Float(1.5)]
+    for _ in range(300):
+        chosen = rng.sample(parts, rng.randrange(2, len(parts) + 1))
+        terms = [rng.choice(coefficients) * p for p in chosen] + ([sp.Rational(3, 2)] if rng.random() < 0.3 else [])
+        base = sp.Add(*terms)
+        split = [t.as_coeff_Mul() for t in base.args]
+        for number in (sp.Rational(1, 2), sp.Rational(-1, 2), sp.Integer(-1), sp.Rational(3, 4)):
+            got = rd._divided(base, split, number)
+            want = sp.Add(*[c / number * rest for c, rest in split])
+            assert got == want and got.args == want.args, (base, number)
