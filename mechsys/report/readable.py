@@ -181,8 +181,8 @@ def _tidy_factor(factor: sp.Expr) -> tuple[sp.Expr, sp.Expr] | None:
         return None
     split = [t.as_coeff_Mul() for t in base.args]
     coeffs = [c for c, _ in split]
-    minus = 2 * sum(1 for c in coeffs if c.is_negative) - len(coeffs)
-    negative = minus > 0 or minus == 0 and min(split, key=_BY_REST)[0].is_negative
+    minus = 2 * sum(1 for c in coeffs if _negative(c)) - len(coeffs)
+    negative = minus > 0 or minus == 0 and _negative(min(split, key=_BY_REST)[0])
     content = _content(coeffs)
     if content == 1 and not negative:
         return None
@@ -190,6 +190,12 @@ def _tidy_factor(factor: sp.Expr) -> tuple[sp.Expr, sp.Expr] | None:
         content = -content
     divided = _divided(base, split, content)
     return (content, divided) if exp is sp.S.One else (content ** exp, divided ** exp)
+
+
+def _negative(c: sp.Expr) -> bool:
+    """c.is_negative for a number, read off a rational's numerator: asking a new Rational object through the
+    assumptions system first deduces all its facts (a third of a 20-link Lagrange clean-up's time)."""
+    return c.p < 0 if c.is_Rational else bool(c.is_negative)
 
 
 def _divided(base: sp.Expr, split: list[tuple[sp.Expr, sp.Expr]], number: sp.Expr) -> sp.Expr:
