@@ -70,14 +70,19 @@ def _fold(expr: sp.Basic, combine: Callable[[sp.Basic, tuple], Value], memo: dic
         if node in memo:
             stack.pop()
             continue
-        pending = [a for a in node.args if a not in memo]
-        if pending:
-            stack.extend(pending)
+        # one lookup per argument (an argument equal to a remembered one but another object is compared with it
+        # through its whole tree: derived equations hold many such copies)
+        values = [memo.get(a, _PENDING) for a in node.args]
+        if any(v is _PENDING for v in values):
+            stack.extend(a for a, v in zip(node.args, values) if v is _PENDING)
             continue
         stack.pop()
         tick()
-        memo[node] = combine(node, tuple(memo[a] for a in node.args))
+        memo[node] = combine(node, tuple(values))
     return memo[expr]
+
+
+_PENDING = object()  # an argument not folded yet
 
 
 def _no_tick() -> None:
