@@ -25,7 +25,7 @@ Wall times are reported, never asserted.
     python benchmarks/derive_chain.py --commands        # the CLI commands users run, n = 5 10 20 40 80
 
 With --commands the script times what users run instead: whole `mechsys` processes (imports included) on the
-chain's YAML file, `derive -f json` with the default method (Lagrange) and with `--method kane`, `info`,
+chain's YAML file, `derive -o FILE` (its default text form) with the default method (Lagrange) and with `--method kane`, `info`,
 `equilibria` and `codegen -t python --method kane` (the generated package), each cold (a fresh private cache folder) and then cached (the same command again), against the
 issue's goals (20-link `derive` under 1 s with every method, n = 80 under 20 s) and the absolute-angle baseline.
 """
