@@ -61,6 +61,9 @@ class Cleanup:
 
 
 # ------------------------------------------------------------------------------------------------ traversal
+_PENDING = object()  # an argument not folded yet
+
+
 def _fold(expr: sp.Basic, combine: Callable[[sp.Basic, tuple], Value], memo: dict,
           tick: Callable[[], None]) -> Value:
     """Post-order fold without recursion (deep trees are fine): combine(node, values of its args), memoized."""
@@ -80,9 +83,6 @@ def _fold(expr: sp.Basic, combine: Callable[[sp.Basic, tuple], Value], memo: dic
         tick()
         memo[node] = combine(node, tuple(values))
     return memo[expr]
-
-
-_PENDING = object()  # an argument not folded yet
 
 
 def _no_tick() -> None:
@@ -186,8 +186,8 @@ def _tidy_factor(factor: sp.Expr) -> tuple[sp.Expr, sp.Expr] | None:
         return None
     split = [t.as_coeff_Mul() for t in base.args]
     coeffs = [c for c, _ in split]
-    minus = 2 * sum(1 for c in coeffs if _negative(c)) - len(coeffs)
-    negative = minus > 0 or minus == 0 and _negative(min(split, key=_BY_REST)[0])
+    minus = 2 * sum(1 for c in coeffs if _negative_number(c)) - len(coeffs)
+    negative = minus > 0 or minus == 0 and _negative_number(min(split, key=_BY_REST)[0])
     content = _content(coeffs)
     if content == 1 and not negative:
         return None
@@ -197,7 +197,7 @@ def _tidy_factor(factor: sp.Expr) -> tuple[sp.Expr, sp.Expr] | None:
     return (content, divided) if exp is sp.S.One else (content ** exp, divided ** exp)
 
 
-def _negative(c: sp.Expr) -> bool:
+def _negative_number(c: sp.Expr) -> bool:
     """c.is_negative for a number, read off a rational's numerator: asking a new Rational object through the
     assumptions system first deduces all its facts (a third of a 20-link Lagrange clean-up's time)."""
     return c.p < 0 if c.is_Rational else bool(c.is_negative)
