@@ -139,3 +139,28 @@ def test_only_the_executable_freezes_what_the_model_loaded(monkeypatch):
                           "sys.argv = ['mechsys', 'info', sys.argv[1]]; cli.entry()", str(CENTRIFUGE)],
                          capture_output=True, text=True)
     assert out.returncode == 0 and "centrifuge" in out.stdout.lower()
+
+
+def test_the_executable_sizes_sympys_caches_and_derives_the_same_text():
+    """`mechsys` asks for larger sympy constructor caches before sympy is imported (cli.size_sympy_cache: equal
+    subexpressions built far apart become one object), keeps a size the user chose, and the derived text is the
+    same at sympy's default size, at the larger one and with no cache at all."""
+    from mechsys import cli
+
+    probe = ("from mechsys import cli; cli.size_sympy_cache(); import sympy.core.cache as c; "
+             "print(c.SYMPY_CACHE_SIZE)")
+    env = {k: v for k, v in __import__("os").environ.items() if k != "SYMPY_CACHE_SIZE"}
+    size = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, env=env, check=True)
+    assert size.stdout.strip() == str(cli.SYMPY_CACHE_SIZE) != "1000"
+    chosen = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True,
+                            env={**env, "SYMPY_CACHE_SIZE": "500"})
+    assert chosen.stdout.strip() == "500"
+    for model, method in ((ROOT / "systems" / "bicycle.yaml", "kane"),
+                          (ROOT / "tests" / "data" / "beyond" / "furuta_rod_arm.yaml", "lagrange")):
+        texts = set()
+        for sizing in ({}, {"SYMPY_CACHE_SIZE": "1000"}, {"SYMPY_USE_CACHE": "no"}):
+            out = subprocess.run([sys.executable, "-m", "mechsys", "derive", "--method", method, str(model)],
+                                 capture_output=True, text=True, env={**env, "MECHSYS_CACHE": "off", **sizing})
+            assert out.returncode == 0, out.stderr
+            texts.add(out.stdout)
+        assert len(texts) == 1
