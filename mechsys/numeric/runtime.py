@@ -78,10 +78,72 @@ def check_source(source: str) -> types.CodeType:
 def function_from_source(source: str) -> Callable[..., list[float]]:
     """The function defined by generated source (printed by sympy from parsed expressions, or read back from
     mechsys's own signed cache), after `check_source` has confirmed it is arithmetic only."""
-    code = check_source(source)
-    namespace: dict = {"math": math, "__builtins__": {"abs": abs, "min": min, "max": max, "float": float}}
+    return function_from_code(check_source(source))
+
+
+def function_from_code(code: types.CodeType, math_module: object = math) -> Callable[..., list[float]]:
+    """The function ``_f`` of code that `check_source` accepted, its `math.` names read from ``math_module``."""
+    namespace: dict = {"math": math_module, "__builtins__": {"abs": abs, "min": min, "max": max, "float": float}}
     exec(code, namespace)  # noqa: S102
     return namespace["_f"]
+
+
+# ------------------------------------------------------------------------------- many points at once
+class _Points(np.ndarray):
+    """The values of one variable of generated code at many points. numpy's +, -, *, / and negation round as
+    Python's float operations do (IEEE); powers and the math functions are Python's own, applied per element
+    (numpy squares, takes square roots and evaluates sin its own way, which may differ in the last bit)."""
+
+    def __pow__(self, other):
+        return _per_element(pow, self, other)
+
+    def __rpow__(self, other):
+        return _per_element(pow, other, self)
+
+    def __array_wrap__(self, array, context=None, return_scalar=False):
+        return array.view(_Points)
+
+
+def _per_element(f: Callable, *args):
+    """f applied to each element (Python floats in, Python floats out): a _Points array, or f's scalar."""
+    out = np.frompyfunc(f, len(args), 1)(*args)
+    return out.astype(float).view(_Points) if isinstance(out, np.ndarray) else out
+
+
+class _MathPerElement:
+    """The math module with each function applied per element of _Points arrays (constants as they are)."""
+
+    def __init__(self) -> None:
+        for name in _MATH:
+            value = getattr(math, name)
+            setattr(self, name, (lambda f: lambda *a: _per_element(f, *a))(value) if callable(value) else value)
+
+
+_MATH_PER_ELEMENT = _MathPerElement()
+
+
+def rows_function_from_code(code: types.CodeType) -> Callable[[np.ndarray], np.ndarray | None]:
+    """``_f`` of checked generated code evaluated at many argument rows in one pass (each operation once on all
+    rows, not the whole code once per row: the 20-link chain's linearization at 504 equilibria, 0.17 s
+    instead of 2.0 s). Each row's outputs are bit for bit what ``_f(*row)`` gives for float64 arguments. None
+    when the code cannot run that way exactly: a condition, min or max on the rows, or any floating-point
+    exception (a division by zero, an overflow, an invalid operation, a math domain error), after which the
+    rows are to be evaluated one by one, as before."""
+    fn = function_from_code(code, _MATH_PER_ELEMENT)
+
+    def rows(args: np.ndarray) -> np.ndarray | None:
+        args = np.asarray(args, dtype=float)
+        try:
+            with np.errstate(divide="raise", over="raise", invalid="raise", under="ignore"):
+                values = fn(*(args[:, j].view(_Points) for j in range(args.shape[1])))
+                out = np.empty((args.shape[0], len(values)))
+                for j, v in enumerate(values):
+                    out[:, j] = v
+        except (ArithmeticError, ValueError, TypeError):  # FloatingPointError is an ArithmeticError
+            return None
+        return out
+
+    return rows
 
 
 def call_generated(fn: Callable[..., list[float]], args: Sequence[float], size: int) -> list[float]:

@@ -737,7 +737,7 @@ def find_equilibria(model: MechanicalModel, search: dict[str, tuple[float, float
     """Equilibria (and steady motions of cyclic coordinates) with their Lyapunov stability. exhaustive: every
     isolated root of polynomial sin/cos equations (analysis/equilibrium/exhaustive.py) instead of the multistart (search is
     then not used)."""
-    from mechsys.analysis.equilibrium.stability import assess
+    from mechsys.analysis.equilibrium.stability import assess_all
 
     problem = make_problem(model, options)
     if exhaustive and not model.is_holonomic:
@@ -771,8 +771,7 @@ def find_equilibria(model: MechanicalModel, search: dict[str, tuple[float, float
         message = ("the equilibria are not isolated (singular Jacobian: e.g. a free rigid-body motion); "
                    "one representative of the continuum is shown")
     equilibria = [problem.equilibrium(z) for z in isolated]
-    for e in equilibria:
-        assess(problem, e, p)
+    assess_all(problem, equilibria, p)
     equilibria, chart_note = review(problem, equilibria, p) if model.is_holonomic else (equilibria, "")
     message = "; ".join(m for m in (message, chart_note, singular_note(problem, dropped)) if m)
     equilibria.sort(key=lambda e: tuple(e.coordinates.values()) + tuple(e.rates.values()))

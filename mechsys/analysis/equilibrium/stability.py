@@ -120,6 +120,20 @@ def _massive_elsewhere(problem, names: list[str], p: np.ndarray) -> bool:
     return False
 
 
+def assess_all(problem, equilibria: list, p: np.ndarray) -> None:
+    """assess() each equilibrium, their linearizations evaluated in one pass first (LinearPieces.evaluated_ahead:
+    the same values, computed together)."""
+    if hasattr(problem, "assess") or hasattr(problem, "pencil") or len(equilibria) < 2:
+        for e in equilibria:
+            assess(problem, e, p)
+        return
+    model = problem.model
+    states = [(*state_at(model, e.coordinates, e.rates), np.array(e.multipliers), p) for e in equilibria]
+    with pieces(model).evaluated_ahead(states):
+        for e in equilibria:
+            assess(problem, e, p)
+
+
 def assess(problem, e, p: np.ndarray) -> None:
     """Fill eigenvalues, Jacobian and verdict of equilibrium ``e`` in place."""
     if hasattr(problem, "assess"):
