@@ -347,3 +347,44 @@ def test_c_source_reuses_the_python_codes_cse(monkeypatch):
     assert len(calls) == 3  # the Python code of A and b took the C code's CSE
     monkeypatch.setattr(lambdify, "_RECENT", lambdify.OrderedDict())
     assert native.model_source(model) == first and len(calls) == 6
+
+
+@pytest.mark.parametrize("name", ["double_pendulum", "four_bar", "rolling_disk", "bicycle"])
+def test_the_units_compiled_at_once_build_the_library_of_the_one_unit(name, tmp_path, monkeypatch):
+    """model_sources splits the integrator's C into the staged equations, the constraint rows and the template,
+    compiled at once (one process each) and linked: the library computes what the one-unit build computes, bit for
+    bit, and exports only the integrator's entry points (the shared functions are hidden: two models' libraries in
+    one process cannot mix). On one core the units go to one process."""
+    import ctypes
+
+    model = mechsys.load(SYSTEMS_DIR / f"{name}.yaml")
+    units = native.model_sources(model)
+    assert len(units) == 3 and "\n".join(native.model_sources(model, split=False)) == native.model_source(model)
+    started = []
+    real = native.subprocess.Popen
+    monkeypatch.setattr(native.subprocess, "Popen", lambda cmd, **kw: started.append(cmd) or real(cmd, **kw))
+    libraries = {}
+    for how, cores in (("one unit", 2), ("split", 2), ("split, one core", 1)):
+        monkeypatch.setattr(native, "_cores", lambda: cores)
+        started.clear()
+        path = tmp_path / f"{how}.so"
+        native.build(native.model_source(model) if how == "one unit" else units, path)
+        assert len(started) == {"one unit": 1, "split": 4, "split, one core": 1}[how]  # 3 compilers + the linker
+        libraries[how] = native.NativeIntegrator(path)
+    assert not hasattr(ctypes.CDLL(str(tmp_path / "split.so")), "pieces")
+    assert not hasattr(ctypes.CDLL(str(tmp_path / "split.so")), "constraint_rows")
+    p = parameter_values(model)
+    rng = np.random.default_rng(2)
+    n = len(model.q)
+    for _ in range(5):
+        y = rng.uniform(-1, 1, 2 * n)
+        one = libraries["one unit"].accelerations(0.0, y, p)
+        assert all(np.array_equal(one, lib.accelerations(0.0, y, p), equal_nan=True) for lib in libraries.values())
+
+
+def test_a_unit_that_does_not_compile_fails_the_build_and_leaves_no_files(tmp_path):
+    folder = tmp_path / "build"
+    folder.mkdir()
+    with pytest.raises(AnalysisError, match="compiling the native integrator failed"):
+        native.build(["int f(void) { return 1; }\n", "int g(void) { return x; }\n"], folder / "lib.so")
+    assert not list(folder.iterdir())

@@ -159,8 +159,12 @@ def c_power(base: str, x) -> Optional[str]:
     return None
 
 
+#: how a function of the model's translation units is declared for the others: not exported from the library
+_SHARED = "__attribute__((visibility(\"hidden\"))) void"
+
+
 def pieces_source(blocks: Sequence[Sequence], t, q: Sequence, u: Sequence, params: Sequence,
-                  name: str = "pieces") -> str:
+                  name: str = "pieces", linkage: str = "static void") -> str:
     """C function ``name(t, q, u, p, out)`` writing the expressions of ``blocks`` one after the other into ``out``.
     Each block's shared subexpressions are computed once, from the same CSE as the block's Python code
     (lambdify.shared_cse: a first `simulate` does not eliminate them twice)."""
@@ -168,7 +172,7 @@ def pieces_source(blocks: Sequence[Sequence], t, q: Sequence, u: Sequence, param
 
     args = {t: "t", **{s: f"q[{i}]" for i, s in enumerate(q)}, **{s: f"u[{i}]" for i, s in enumerate(u)},
             **{s: f"p[{i}]" for i, s in enumerate(params)}}
-    lines = [f"static void {name}(double t, const double *q, const double *u, const double *p, double *out) {{",
+    lines = [f"{linkage} {name}(double t, const double *q, const double *u, const double *p, double *out) {{",
              "    (void)t; (void)q; (void)u; (void)p;"]
     start = 0
     for b, exprs in enumerate(blocks):
@@ -210,6 +214,13 @@ def _dop853_coefficients():
 
 def model_source(model) -> str:
     """The complete C translation unit for one model structure."""
+    return "\n".join(model_sources(model, split=False))
+
+
+def model_sources(model, split: bool = True) -> list[str]:
+    """The C translation units of one model structure: the staged equations, the constraint rows and the
+    integrator template, which the compiler then builds at once, one process each (on two cores the bicycle's
+    -O2 build takes 0.35 s instead of 0.76 s; the rows alone take 0.32 s); or (``split`` False) one unit."""
     from mechsys.numeric.kane import model_pieces
 
     co = _dop853_coefficients()
@@ -218,58 +229,98 @@ def model_source(model) -> str:
     m = len(model.kin.constraints)
     rows = [list(model.constraint_jacobian), list(model.constraint_rhs)] if m else [[0]]  # A (m x n, row-major), b
     head = ["#include <math.h>", "#include <string.h>", "#ifndef M_PI", "#define M_PI 3.14159265358979323846",
-            "#endif", f"#define N {n}", f"#define NPAR {len(model.parameter_symbols)}", f"#define NOUT {max(len(pieces), 1)}", f"#define NB {max(len(layout), 1)}",
-            "static const int LAYOUT[2 * NB] = {" + (", ".join(str(int(x)) for b in layout for x in b) or "0, 0")
-            + "};",
-            _table("A", co.A), _table("B", co.B), _table("C", co.C), _table("E3", co.E3), _table("E5", co.E5),
-            _table("D", co.D),
-            f"#define NCON {m}",
-            pieces_source([pieces], model.t, model.q, model.u, model.parameter_symbols),
-            pieces_source(rows, model.t, model.q, model.u, model.parameter_symbols, "constraint_rows")]
-    return "\n".join(head) + "\n" + TEMPLATE.read_text(encoding="utf-8")
+            "#endif"]
+    sizes = [f"#define N {n}", f"#define NPAR {len(model.parameter_symbols)}", f"#define NOUT {max(len(pieces), 1)}",
+             f"#define NB {max(len(layout), 1)}",
+             "static const int LAYOUT[2 * NB] = {" + (", ".join(str(int(x)) for b in layout for x in b) or "0, 0")
+             + "};",
+             _table("A", co.A), _table("B", co.B), _table("C", co.C), _table("E3", co.E3), _table("E5", co.E5),
+             _table("D", co.D),
+             f"#define NCON {m}"]
+    linkage = _SHARED if split else "static void"
+    functions = [pieces_source([pieces], model.t, model.q, model.u, model.parameter_symbols, linkage=linkage),
+                 pieces_source(rows, model.t, model.q, model.u, model.parameter_symbols, "constraint_rows", linkage)]
+    template = TEMPLATE.read_text(encoding="utf-8")
+    if not split:
+        return head + sizes + functions + [template]
+    declared = [f"{_SHARED} {name}(double t, const double *q, const double *u, const double *p, double *out);"
+                for name in ("pieces", "constraint_rows")]
+    return ["\n".join(head + [f]) + "\n" for f in functions] + ["\n".join(head + sizes + declared) + "\n" + template]
 
 
-def build(source: str, target: Path, opt: str | None = None) -> None:
-    """Compile ``source`` into the shared library ``target`` (atomically: a partial file never appears) at the
-    optimisation level ``opt`` (by default -O2, -O1 for very long sources)."""
+def build(source: str | Sequence[str], target: Path, opt: str | None = None) -> None:
+    """Compile ``source`` (one translation unit, or several) into the shared library ``target`` (atomically: a
+    partial file never appears) at the optimisation level ``opt`` (by default -O2, -O1 for very long sources)."""
     PendingBuild(source, target, opt).finish()
 
 
-class PendingBuild:
-    """The C compiler running on ``source`` in its own process (started here); ``finish()`` waits for it and
-    moves the library to ``target`` (AnalysisError when it failed). Meanwhile the caller's Python work runs on
-    the other core: a first `simulate` generates its Python code while its integrator compiles."""
+def _cores() -> int:
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # pragma: no cover - platforms without affinity
+        return os.cpu_count() or 1
 
-    def __init__(self, source: str, target: Path, opt: str | None = None) -> None:
+
+class PendingBuild:
+    """The C compiler running on ``source`` in processes of its own (started here): one translation unit is
+    compiled and linked by one process; several (on a machine with more than one core) are compiled at once, one
+    process each, and linked by ``finish()``. ``finish()`` waits for them and moves the library to ``target``
+    (AnalysisError when one failed). Meanwhile the caller's Python work runs: a first `simulate` generates its
+    Python code while its integrator compiles."""
+
+    def __init__(self, source: str | Sequence[str], target: Path, opt: str | None = None) -> None:
         cc = compiler()
         if cc is None:
             raise AnalysisError("no C compiler found for the native integrator (set CC or use --method DOP853)")
+        units = [source] if isinstance(source, str) else list(source)
+        if len(units) > 1 and _cores() < 2:
+            units = ["\n".join(units)]  # one core: one process (the units declare what they share the same way)
         self.target = target
+        self._cc = cc
         self._tmp = tempfile.TemporaryDirectory(dir=target.parent)
-        c_file = Path(self._tmp.name) / "model.c"
-        c_file.write_text(source, encoding="utf-8")
         self._so = Path(self._tmp.name) / "model.so"
-        opt = opt or ("-O2" if len(source) < 2_000_000 else "-O1")
-        self._proc = subprocess.Popen([cc, opt, "-std=gnu99", "-fPIC", "-shared", "-o", str(self._so), str(c_file),
-                                       "-lm"], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+        opt = opt or ("-O2" if sum(len(u) for u in units) < 2_000_000 else "-O1")
+        self._objects: list[Path] = []
+        self._procs = []
+        for k, unit in enumerate(units):
+            c_file = Path(self._tmp.name) / f"model{k}.c"
+            c_file.write_text(unit, encoding="utf-8")
+            if len(units) == 1:
+                out, what = self._so, ["-shared", "-o", str(self._so), str(c_file), "-lm"]
+            else:
+                out = c_file.with_suffix(".o")
+                what = ["-c", "-o", str(out), str(c_file)]
+                self._objects.append(out)
+            self._procs.append(subprocess.Popen([cc, opt, "-std=gnu99", "-fPIC", *what], stdout=subprocess.DEVNULL,
+                                                stderr=subprocess.PIPE, text=True))
 
     def finish(self) -> Path:
         try:
-            _, err = self._proc.communicate()
-            if self._proc.returncode != 0:
-                first = (err.strip().splitlines() or ["unknown error"])[0]
-                raise AnalysisError(f"compiling the native integrator failed: {first}")
+            for proc in self._procs:
+                _check(proc, *proc.communicate())
+            if self._objects:
+                link = subprocess.Popen([self._cc, "-shared", "-o", str(self._so), *map(str, self._objects), "-lm"],
+                                        stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+                _check(link, *link.communicate())
             os.replace(self._so, self.target)
         finally:
-            self._tmp.cleanup()
+            self.cancel()
         return self.target
 
     def cancel(self) -> None:
-        """Stop the compiler (the process exits without its result) and remove the temporary files."""
-        if self._proc.poll() is None:
-            self._proc.kill()
-        self._proc.communicate()
+        """Stop the compilers (each exits without its result) and remove the temporary files."""
+        for proc in self._procs:
+            if proc.poll() is None:
+                proc.kill()
+            proc.wait()
+            proc.stderr.close()
         self._tmp.cleanup()
+
+
+def _check(proc: subprocess.Popen, _out, err: str) -> None:
+    if proc.returncode != 0:
+        first = (err.strip().splitlines() or ["unknown error"])[0]
+        raise AnalysisError(f"compiling the native integrator failed: {first}")
 
 
 @dataclass
@@ -373,7 +424,7 @@ def start(model) -> None:
         model._native_integrator.from_cache, model._native_integrator.key = True, key
         return
     tmp = tempfile.TemporaryDirectory(prefix="mechsys-native-")
-    pending = PendingBuild(model_source(model), Path(tmp.name) / f"{key}.so")
+    pending = PendingBuild(model_sources(model), Path(tmp.name) / f"{key}.so")
     model._native_pending = (key, tmp, pending)
     if not _UNFINISHED:
         atexit.register(_abandon)
@@ -422,7 +473,7 @@ def load(model) -> Optional[NativeIntegrator]:
             with tmp:
                 built = Path(tmp.name) / f"{key}.so"
                 if pending is None:
-                    build(model_source(model), built)
+                    build(model_sources(model), built)
                 else:
                     _UNFINISHED.pop(id(pending), None)
                     pending.finish()
