@@ -1170,7 +1170,7 @@ FULL_COLLECTION_EVERY = 1000
 #: entries of each of sympy's constructor caches in a `mechsys` process (sympy's default is 1,000): a derivation
 #: builds the same sums and products from the same arguments far apart, and a hit gives back the object built
 #: first, so equal subexpressions are one object and whatever is remembered per object (the differentiator, the
-#: clean-up, the printers) works once. The 80-link chain's `derive --method kane`: 19.2 -> 17.5 s, the 40-link
+#: clean-up, the printers) works once. The 80-link chain's `derive --method kane`: 19.7 -> 18.1 s, the 40-link
 #: chain's `derive` 20.7 -> 18.1 s, the same text; 40 to 70 MB more peak memory. Results are equal either way.
 SYMPY_CACHE_SIZE = 100_000
 

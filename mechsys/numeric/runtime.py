@@ -136,6 +136,8 @@ def rows_function_from_code(code: types.CodeType) -> Callable[[np.ndarray], np.n
         try:
             with np.errstate(divide="raise", over="raise", invalid="raise", under="ignore"):
                 values = fn(*(args[:, j].view(_Points) for j in range(args.shape[1])))
+                if any(np.iscomplexobj(v) for v in values):  # (storing would drop the imaginary part)
+                    return None
                 out = np.empty((args.shape[0], len(values)))
                 for j, v in enumerate(values):
                     out[:, j] = v

@@ -107,15 +107,13 @@ class LinearPieces:
 
     def evaluate(self, q: np.ndarray, u: np.ndarray, lam: np.ndarray, p: np.ndarray) -> dict[str, np.ndarray]:
         key = _exact_key(q, u, lam, p)
-        out = self._evaluated.get(key) if key is not None else None
-        if out is None:
-            out = np.asarray(self._fn(*q, *u, *lam, *p), dtype=float)
+        ahead = self._evaluated.get(key) if key is not None else None
+        out = ahead.copy() if ahead is not None else np.asarray(self._fn(*q, *u, *lam, *p), dtype=float)
         result = {}
         for key, (start, shape) in self.layout.items():
             size = shape[0] * shape[1]
             result[key] = out[start:start + size].reshape(shape)
         return result
-
 
     @contextmanager
     def evaluated_ahead(self, states: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]) -> Iterator[None]:
