@@ -120,10 +120,15 @@ def _massive_elsewhere(problem, names: list[str], p: np.ndarray) -> bool:
     return False
 
 
+#: equilibria from which assess_all evaluates their linearizations in one pass: a pass costs about as much as
+#: evaluating 25 to 30 points one by one (numpy's call per operation), then little per point
+AHEAD_FROM = 32
+
+
 def assess_all(problem, equilibria: list, p: np.ndarray) -> None:
-    """assess() each equilibrium, their linearizations evaluated in one pass first (LinearPieces.evaluated_ahead:
-    the same values, computed together)."""
-    if hasattr(problem, "assess") or hasattr(problem, "pencil") or len(equilibria) < 2:
+    """assess() each equilibrium; from AHEAD_FROM of them on, their linearizations evaluated in one pass first
+    (LinearPieces.evaluated_ahead: the same values, computed together)."""
+    if hasattr(problem, "assess") or hasattr(problem, "pencil") or len(equilibria) < AHEAD_FROM:
         for e in equilibria:
             assess(problem, e, p)
         return
