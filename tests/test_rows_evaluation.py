@@ -17,12 +17,14 @@ from mechsys.numeric.parameters import parameter_values
 from mechsys.numeric.runtime import check_source, function_from_code, rows_function_from_code
 
 # powers (integer, fractional, negative, of a sum), math functions of one and two arguments, constants,
-# an output that does not depend on the arguments, a Rational as generated code prints it
+# an output that does not depend on the arguments, a Rational as generated code prints it, floored remainders
+# (a Mod) and quotients
 SOURCE = """def _f(a0, a1, a2):
     x0 = math.sin(a0)
     x1 = (a0*a1 + a2)
     return [(x0)**2 + (a1)**3, (x1)**(-2), (a2*a2 + 1.5)**(0.3333333333333333), math.atan2(a1, a0)*math.exp(a2),
-            (1/3)*math.sqrt(abs(a1)) - math.pi, (2)**(3), abs(a0)**(a2), -(x1)/(a0 - 7.25), math.cosh(a1)]
+            (1/3)*math.sqrt(abs(a1)) - math.pi, (2)**(3), abs(a0)**(a2), -(x1)/(a0 - 7.25), math.cosh(a1),
+            a1 % 1.7, (-(a0)) % (a2 + 3.5), 2.5 % (a2 + 3.5), (a0*a1) // 0.3]
 """
 
 
@@ -34,7 +36,7 @@ def _one_by_one(source: str, rows: np.ndarray) -> np.ndarray:
 def test_rows_equal_one_point_at_a_time_bit_for_bit():
     rows = np.random.default_rng(3).uniform(-3, 3, (400, 3))
     together = rows_function_from_code(check_source(SOURCE))(rows)
-    assert together is not None and together.shape == (400, 9)
+    assert together is not None and together.shape == (400, 13)
     assert np.array_equal(together, _one_by_one(SOURCE, rows))
 
 

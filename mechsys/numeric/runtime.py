@@ -4,6 +4,7 @@ from __future__ import annotations
 import dis
 import inspect
 import math
+import operator
 import sys
 import types
 from dataclasses import dataclass
@@ -91,14 +92,27 @@ def function_from_code(code: types.CodeType, math_module: object = math) -> Call
 # ------------------------------------------------------------------------------- many points at once
 class _Points(np.ndarray):
     """The values of one variable of generated code at many points. numpy's +, -, *, / and negation round as
-    Python's float operations do (IEEE); powers and the math functions are Python's own, applied per element
-    (numpy squares, takes square roots and evaluates sin its own way, which may differ in the last bit)."""
+    Python's float operations do (IEEE); powers, floored remainders and quotients and the math functions are
+    Python's own, applied per element (numpy squares, takes square roots and evaluates sin its own way, which may
+    differ in the last bit)."""
 
     def __pow__(self, other):
-        return _per_element(pow, self, other)
+        return _per_element(operator.pow, self, other)
 
     def __rpow__(self, other):
-        return _per_element(pow, other, self)
+        return _per_element(operator.pow, other, self)
+
+    def __mod__(self, other):
+        return _per_element(operator.mod, self, other)
+
+    def __rmod__(self, other):
+        return _per_element(operator.mod, other, self)
+
+    def __floordiv__(self, other):
+        return _per_element(operator.floordiv, self, other)
+
+    def __rfloordiv__(self, other):
+        return _per_element(operator.floordiv, other, self)
 
     def __array_wrap__(self, array, context=None, return_scalar=False):
         return array.view(_Points)

@@ -106,8 +106,8 @@ class LinearPieces:
                 "A": at_t0(eq.A)}
 
     def evaluate(self, q: np.ndarray, u: np.ndarray, lam: np.ndarray, p: np.ndarray) -> dict[str, np.ndarray]:
-        key = _exact_key(q, u, lam, p)
-        ahead = self._evaluated.get(key) if key is not None else None
+        inputs = _exact_key(q, u, lam, p)
+        ahead = self._evaluated.get(inputs) if inputs is not None else None
         out = ahead.copy() if ahead is not None else np.asarray(self._fn(*q, *u, *lam, *p), dtype=float)
         result = {}
         for key, (start, shape) in self.layout.items():
