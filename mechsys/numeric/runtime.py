@@ -96,24 +96,6 @@ class _Points(np.ndarray):
     Python's own, applied per element (numpy squares, takes square roots and evaluates sin its own way, which may
     differ in the last bit)."""
 
-    def __pow__(self, other):
-        return _per_element(operator.pow, self, other)
-
-    def __rpow__(self, other):
-        return _per_element(operator.pow, other, self)
-
-    def __mod__(self, other):
-        return _per_element(operator.mod, self, other)
-
-    def __rmod__(self, other):
-        return _per_element(operator.mod, other, self)
-
-    def __floordiv__(self, other):
-        return _per_element(operator.floordiv, self, other)
-
-    def __rfloordiv__(self, other):
-        return _per_element(operator.floordiv, other, self)
-
     def __array_wrap__(self, array, context=None, return_scalar=False):
         return array.view(_Points)
 
@@ -122,6 +104,12 @@ def _per_element(f: Callable, *args):
     """f applied to each element (Python floats in, Python floats out): a _Points array, or f's scalar."""
     out = np.frompyfunc(f, len(args), 1)(*args)
     return out.astype(float).view(_Points) if isinstance(out, np.ndarray) else out
+
+
+for _name, _op in (("pow", operator.pow), ("mod", operator.mod), ("floordiv", operator.floordiv)):
+    setattr(_Points, f"__{_name}__", lambda self, other, op=_op: _per_element(op, self, other))
+    setattr(_Points, f"__r{_name}__", lambda self, other, op=_op: _per_element(op, other, self))
+del _name, _op
 
 
 class _MathPerElement:
