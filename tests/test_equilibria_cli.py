@@ -238,3 +238,29 @@ def test_the_fold_csv_example_of_the_docs_is_what_the_tool_prints():
     assert shown[0] == printed[0]
     for line in shown[1:]:
         assert line in printed, line
+
+
+def _block_on(tmp_path, potential: str):
+    """A block on a line in a potential (written as a user would, like tests/data/hilltop_block.yaml)."""
+    path = tmp_path / "block.yaml"
+    path.write_text("name: block\nparameters: {m: 2.0, k: 3.0}\ncoordinates:\n  x: {initial: 0.1}\nlinks:\n"
+                    "  block:\n    joint: {type: prismatic, parent: ground, axis: x, coordinate: x}\n    mass: m\n"
+                    f"forces:\n  - {{type: potential, value: {potential}}}\n")
+    return path
+
+
+def test_modes_about_an_unstable_equilibrium_say_the_search_found_no_stable_one(tmp_path):
+    """Without --at, modes vibrate about the first stable equilibrium found; when the search finds none (a block on
+    a hilltop, V = -k x^2/2: x = 0 alone, unstable, w^2 = -k/m) the output says so and what the search covered,
+    in the text and in JSON; with a stable one (V = +k x^2/2: w^2 = k/m) or with --at there is no such note."""
+    hill = DATA / "hilltop_block.yaml"
+    text = invoke("modes", hill)
+    assert text.exit_code == 0, text.output
+    flat = " ".join(text.output.split())
+    assert "the search found no stable equilibrium (deflated Newton from" in flat and "give another with --at" in flat
+    data = ok_json("modes", hill, "-f", "json")
+    assert data["unstable_modes"] == 1 and data["note"].startswith("the search found no stable equilibrium")
+    assert "note" not in ok_json("modes", hill, "--at", "x=0", "-f", "json")
+    valley = ok_json("modes", _block_on(tmp_path, "k/2*x^2"), "-f", "json")
+    assert "note" not in valley and valley["unstable_modes"] == 0
+    assert valley["modes"][0]["frequency_rad_s"] ** 2 == pytest.approx(3.0 / 2.0, rel=1e-12)

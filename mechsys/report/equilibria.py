@@ -171,6 +171,8 @@ def modes_tables(modes) -> list[Table]:
         s.add(c + (" (condensed)" if c in modes.condensed else ""), *[float(x) for x in modes.shapes[i]])
     if modes.unstable_modes:
         t.notes.append(f"{modes.unstable_modes} mode(s) with negative stiffness: the equilibrium is statically unstable")
+    if modes.note:
+        t.notes.append(modes.note)
     return [t, s]
 
 

@@ -28,6 +28,7 @@ class Modes:
     condensed: list[str] = field(default_factory=list)
     unstable_modes: int = 0
     system: "ReducedSystem | None" = None
+    note: str = ""  # why the equilibrium is an unstable one (the search found no stable equilibrium), else ""
 
     @property
     def frequencies_hz(self) -> np.ndarray:
@@ -44,6 +45,7 @@ class Modes:
             "eigenvalues": [[float(v.real), float(v.imag)] for v in self.eigenvalues],
             "condensed": self.condensed,
             "unstable_modes": self.unstable_modes,
+            **({"note": self.note} if self.note else {}),
         }
 
     def _repr_markdown_(self) -> str:
@@ -85,7 +87,23 @@ class ReducedSystem:
         return A, B, Cout, np.zeros((self.T.shape[0], self.T.shape[0]))
 
 
-def _equilibrium(model: MechanicalModel, at: dict[str, float] | None) -> Equilibrium:
+_STABLE = ("asymptotically stable", "stable")
+
+
+def _first_stable(res, candidates: list[Equilibrium], kind: str = "equilibrium") -> tuple[Equilibrium, str]:
+    """The first stable equilibrium of the candidates, or (none stable) the first one with a note saying that the
+    search found no stable equilibrium and what it covered (a long chain's multistart may miss its one stable
+    rest among 2^n)."""
+    stable = [e for e in candidates if e.stability in _STABLE]
+    if stable:
+        return stable[0], ""
+    what = f" ({res.search.text()})" if res.search is not None else ""
+    return candidates[0], (f"the search found no stable {kind}{what}: these modes are about the first one "
+                           f"found ({candidates[0].stability}); give another with --at")
+
+
+def _equilibrium(model: MechanicalModel, at: dict[str, float] | None) -> tuple[Equilibrium, str]:
+    """The equilibrium to vibrate about and, when it is unstable for want of a stable one, a note saying so."""
     if at is None:
         res = find_equilibria(model)
         if not res.equilibria:
@@ -94,8 +112,7 @@ def _equilibrium(model: MechanicalModel, at: dict[str, float] | None) -> Equilib
         if not regular:
             raise AnalysisError(f"every equilibrium found is at a {res.equilibria[0].chart}: the linearization in "
                                 "these coordinates is singular; write the joint with another sequence")
-        stable = [e for e in regular if e.stability in ("asymptotically stable", "stable")]
-        return (stable or regular)[0]
+        return _first_stable(res, regular)
     problem = EquilibriumProblem(model)
     unknown = set(at) - set(problem.free) - set(problem.rate_unknowns)
     if unknown:
@@ -118,7 +135,7 @@ def _equilibrium(model: MechanicalModel, at: dict[str, float] | None) -> Equilib
         raise AnalysisError(f"--at is at a {found[0].describe()}: the linearization in these coordinates is "
                             "singular; write the joint with another sequence")
     assess(problem, e, p)
-    return e
+    return e, ""
 
 
 def reduce(model: MechanicalModel, lin: Linearization) -> tuple[ReducedSystem, list[str]]:
@@ -159,7 +176,7 @@ def vibration_modes(model: MechanicalModel, at: dict[str, float] | None = None, 
     """Modes about ``at`` (polished to an exact equilibrium) or about the first stable equilibrium."""
     if not model.is_holonomic:
         return steady_modes(model, at, options)
-    e = _equilibrium(model, at)
+    e, note = _equilibrium(model, at)
     lin = linearize(model, e)
     red, condensed = reduce(model, lin)
     Ks = (red.K + red.K.T) / 2
@@ -196,7 +213,7 @@ def vibration_modes(model: MechanicalModel, at: dict[str, float] | None = None, 
             if abs(zeta[k]) < 1e-12:
                 zeta[k] = 0.0
     names = list(lin.coordinates)
-    return Modes(names, e, freqs, shapes, rigid, zeta, vals, condensed, unstable, red)
+    return Modes(names, e, freqs, shapes, rigid, zeta, vals, condensed, unstable, red, note)
 
 
 def steady_modes(model: MechanicalModel, at: dict[str, float] | None = None, options=None) -> Modes:
@@ -214,9 +231,9 @@ def steady_modes(model: MechanicalModel, at: dict[str, float] | None = None, opt
         res = find_equilibria(model, options=options)
         if not res.equilibria:
             raise AnalysisError("no steady motion found to vibrate about; give one with --at")
-        stable = [e for e in res.equilibria if e.stability in ("asymptotically stable", "stable")]
-        e = (stable or res.equilibria)[0]
+        e, note = _first_stable(res, res.equilibria, "steady motion")
     else:
+        note = ""
         unknown = set(at) - set(problem.free) - {f"der({c})" for c in problem.rate_unknowns}
         if unknown:
             raise InputError(f"--at: {', '.join(sorted(unknown))} is not a free shape coordinate "
@@ -246,7 +263,7 @@ def steady_modes(model: MechanicalModel, at: dict[str, float] | None = None, opt
     shapes = np.column_stack([s for _, s in chosen]) if chosen else np.zeros((nxi, 0))
     unstable = sum(1 for v, _ in chosen if v.real > 1e-9 * max(1.0, abs(v)))
     return Modes(list(lin.coordinates), e, freqs, shapes, [False] * len(chosen), zeta, lin.eigenvalues, [],
-                 unstable, None)
+                 unstable, None, note)
 
 
 def frf(model: MechanicalModel, modes: Modes, omegas: np.ndarray, inp: str, out: str) -> np.ndarray:
