@@ -173,7 +173,8 @@ def reduce(model: MechanicalModel, lin: Linearization) -> tuple[ReducedSystem, l
 
 
 def vibration_modes(model: MechanicalModel, at: dict[str, float] | None = None, options=None) -> Modes:
-    """Modes about ``at`` (polished to an exact equilibrium) or about the first stable equilibrium."""
+    """Modes about ``at`` (polished to an exact equilibrium) or about the first stable equilibrium found (else the
+    first found, with a note: Modes.note)."""
     if not model.is_holonomic:
         return steady_modes(model, at, options)
     e, note = _equilibrium(model, at)
