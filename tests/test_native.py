@@ -357,6 +357,8 @@ def test_the_units_compiled_at_once_build_the_library_of_the_one_unit(name, tmp_
     one process cannot mix). On one core the units go to one process."""
     import ctypes
 
+    from mechsys.numeric import parallel
+
     model = mechsys.load(SYSTEMS_DIR / f"{name}.yaml")
     units = native.model_sources(model)
     assert len(units) == 3 and "\n".join(native.model_sources(model, split=False)) == native.model_source(model)
@@ -365,7 +367,7 @@ def test_the_units_compiled_at_once_build_the_library_of_the_one_unit(name, tmp_
     monkeypatch.setattr(native.subprocess, "Popen", lambda cmd, **kw: started.append(cmd) or real(cmd, **kw))
     libraries = {}
     for how, cores in (("one unit", 2), ("split", 2), ("split, one core", 1)):
-        monkeypatch.setattr(native, "_cores", lambda: cores)
+        monkeypatch.setattr(parallel, "cores", lambda: cores)
         started.clear()
         path = tmp_path / f"{how}.so"
         native.build(native.model_source(model) if how == "one unit" else units, path)

@@ -254,13 +254,6 @@ def build(source: str | Sequence[str], target: Path, opt: str | None = None) -> 
     PendingBuild(source, target, opt).finish()
 
 
-def _cores() -> int:
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:  # pragma: no cover - platforms without affinity
-        return os.cpu_count() or 1
-
-
 class PendingBuild:
     """The C compiler running on ``source`` in processes of its own (started here): one translation unit is
     compiled and linked by one process; several (on a machine with more than one core) are compiled at once, one
@@ -272,8 +265,10 @@ class PendingBuild:
         cc = compiler()
         if cc is None:
             raise AnalysisError("no C compiler found for the native integrator (set CC or use --method DOP853)")
+        from mechsys.numeric.parallel import cores  # (not at import: a warm run loads libraries, builds none)
+
         units = [source] if isinstance(source, str) else list(source)
-        if len(units) > 1 and _cores() < 2:
+        if len(units) > 1 and cores() < 2:
             units = ["\n".join(units)]  # one core: one process (the units declare what they share the same way)
         self.target = target
         self._cc = cc

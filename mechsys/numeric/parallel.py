@@ -38,6 +38,11 @@ def available() -> int:
             from mechsys.errors import InputError
 
             raise InputError(f"{ENV}={text!r}: expected a whole number of worker processes") from None
+    return cores()
+
+
+def cores() -> int:
+    """The CPUs this process may run on."""
     try:
         return max(1, len(os.sched_getaffinity(0)))
     except (AttributeError, OSError):
