@@ -1,5 +1,6 @@
 """End-to-end CLI behaviour: derive JSON contract, --set, --check, formats, info, schema, atomic output."""
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -149,7 +150,7 @@ def test_the_executable_sizes_sympys_caches_and_derives_the_same_text():
 
     probe = ("from mechsys import cli; cli.size_sympy_cache(); import sympy.core.cache as c; "
              "print(c.SYMPY_CACHE_SIZE)")
-    env = {k: v for k, v in __import__("os").environ.items() if k != "SYMPY_CACHE_SIZE"}
+    env = {k: v for k, v in os.environ.items() if k != "SYMPY_CACHE_SIZE"}
     size = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, env=env, check=True)
     assert size.stdout.strip() == str(cli.SYMPY_CACHE_SIZE) != "1000"
     chosen = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True,
