@@ -8,6 +8,7 @@ import json
 import os
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -390,3 +391,67 @@ def test_a_unit_that_does_not_compile_fails_the_build_and_leaves_no_files(tmp_pa
     with pytest.raises(AnalysisError, match="compiling the native integrator failed"):
         native.build(["int f(void) { return 1; }\n", "int g(void) { return x; }\n"], folder / "lib.so")
     assert not list(folder.iterdir())
+
+
+def _program_sources(path, monkeypatch, tmp_path) -> tuple[str, dict[str, int], int]:
+    """The C program of a model's constrained steady-motion pieces (what load_program builds, from the cache entry
+    ConstrainedPieces stores), its functions and its argument count."""
+    from mechsys.analysis.equilibrium.nonholonomic import ConstrainedPieces
+    from mechsys.numeric import cache
+
+    monkeypatch.setenv("MECHSYS_CACHE", str(tmp_path / "cache"))
+    model = mechsys.load(path)
+    pieces = ConstrainedPieces(model, "kane")
+    source = cache.load(cache.model_key(model, "constrained-pieces-kane"))["c"]
+    return source, {"mechsys_values": pieces.size, "mechsys_full": pieces._full_size}, pieces.n_args
+
+
+@pytest.mark.skipif(native.shutil.which("tcc") is None, reason="the Tiny C Compiler is not installed (make install)")
+@pytest.mark.parametrize("path", [SYSTEMS_DIR / "bicycle.yaml", SYSTEMS_DIR / "rolling_disk.yaml",
+                                  DATA_DIR / "chaplygin_sleigh.yaml", DATA_DIR / "andrews_squeezer.yaml"],
+                         ids=lambda p: p.stem)
+def test_the_quick_compiler_builds_programs_that_compute_what_gccs_compute(path, tmp_path, monkeypatch):
+    """tcc (quick_compiler) and the C compiler at -O0 build the same steady-motion program: the same numbers, bit
+    for bit, at random arguments (unoptimised code does each operation in the source's order)."""
+    source, functions, n_args = _program_sources(path, monkeypatch, tmp_path)
+    programs = []
+    for cc in (native.shutil.which("tcc"), native.compiler()):
+        built = tmp_path / f"{Path(cc).name}.so"
+        native.build(source, built, "-O0", cc)
+        programs.append(native.Program(built, functions, n_args))
+    rng = np.random.default_rng(4)
+    for _ in range(50):
+        a = rng.uniform(-2.0, 2.0, n_args)
+        for name in functions:
+            x, y = (program(name, a) for program in programs)
+            assert np.array_equal(x.view(np.int64), y.view(np.int64))
+
+
+def test_programs_are_built_by_the_quick_compiler_else_by_the_c_compiler(tmp_path, monkeypatch):
+    """load_program builds with quick_compiler() (tcc when there is one), keys the library by that compiler, and
+    when it fails builds with compiler() instead; MECHSYS_QUICK_CC=off takes compiler()."""
+    monkeypatch.setenv("MECHSYS_CACHE", str(tmp_path / "cache"))
+    source = "void f(const double *a, double *out) { out[0] = a[0] * a[1] + sin(a[0]); }\n"
+    source = "#include <math.h>\n" + source
+    monkeypatch.setenv("MECHSYS_QUICK_CC", "off")
+    assert native.quick_compiler() == native.compiler()
+    failing = tmp_path / "failing-cc"
+    failing.write_text("#!/bin/sh\nexit 1\n")
+    failing.chmod(0o755)
+    monkeypatch.setenv("MECHSYS_QUICK_CC", str(failing))
+    assert native.quick_compiler() == str(failing)
+    started = []
+    real = native.subprocess.Popen
+    monkeypatch.setattr(native.subprocess, "Popen", lambda cmd, **kw: started.append(cmd[0]) or real(cmd, **kw))
+    program = native.load_program("quick-test", source, {"f": 1}, 2)
+    assert started == [str(failing), native.compiler()]
+    assert program("f", np.array([0.5, 3.0]))[0] == 0.5 * 3.0 + np.sin(0.5)
+    libraries = sorted(p.name for p in (tmp_path / "cache").glob("*.so"))
+    assert len(libraries) == 1 and "-failing-cc-" in libraries[0]
+    monkeypatch.setenv("MECHSYS_QUICK_CC", "off")
+    started.clear()
+    native.load_program("quick-test", source, {"f": 1}, 2)  # another compiler: another library
+    assert started == [native.compiler()] and len(list((tmp_path / "cache").glob("*.so"))) == 2
+    started.clear()
+    native.load_program("quick-test", source, {"f": 1}, 2)
+    assert started == []  # from the cache

@@ -60,6 +60,22 @@ def compiler() -> Optional[str]:
     return None
 
 
+def quick_compiler() -> Optional[str]:
+    """The compiler of code built without optimisation (the straight-line programs of load_program): the Tiny C
+    Compiler when there is one (MECHSYS_QUICK_CC, then tcc), else compiler(); MECHSYS_QUICK_CC=off takes
+    compiler(). tcc translates the bicycle's constrained pieces (375 kB) in 0.015 s where gcc -O0 takes 0.8 s, and
+    its code runs as fast and computes the same (unoptimised code, each operation in the source's order: bit for
+    bit gcc -O0's results on the bicycle, tests/test_native.py). Not for the integrator or newton.c (-O2)."""
+    cc = compiler()
+    choice = os.environ.get("MECHSYS_QUICK_CC", "")
+    if cc is None or choice.lower() in ("off", "0", "false", "no"):
+        return cc
+    for name in (choice, "tcc"):
+        if name and shutil.which(name):
+            return shutil.which(name)
+    return cc
+
+
 def _c_printer(names: dict, fast: bool = True):
     """A C99 printer of straight-line code; ``names`` maps symbols to C names. With ``fast``, sums, products,
     powers, numbers, symbols and the elementary functions are printed directly, in the order of the expression's
@@ -248,10 +264,11 @@ def model_sources(model, split: bool = True) -> list[str]:
     return ["\n".join(head + [f]) + "\n" for f in functions] + ["\n".join(head + sizes + declared) + "\n" + template]
 
 
-def build(source: str | Sequence[str], target: Path, opt: str | None = None) -> None:
+def build(source: str | Sequence[str], target: Path, opt: str | None = None, cc: str | None = None) -> None:
     """Compile ``source`` (one translation unit, or several) into the shared library ``target`` (atomically: a
-    partial file never appears) at the optimisation level ``opt`` (by default -O2, -O1 for very long sources)."""
-    PendingBuild(source, target, opt).finish()
+    partial file never appears) at the optimisation level ``opt`` (by default -O2, -O1 for very long sources) with
+    ``cc`` (by default compiler())."""
+    PendingBuild(source, target, opt, cc).finish()
 
 
 class PendingBuild:
@@ -261,8 +278,9 @@ class PendingBuild:
     (AnalysisError when one failed). Meanwhile the caller's Python work runs: a first `simulate` generates its
     Python code while its integrator compiles."""
 
-    def __init__(self, source: str | Sequence[str], target: Path, opt: str | None = None) -> None:
-        cc = compiler()
+    def __init__(self, source: str | Sequence[str], target: Path, opt: str | None = None,
+                 cc: str | None = None) -> None:
+        cc = cc or compiler()
         if cc is None:
             raise AnalysisError("no C compiler found for the native integrator (set CC or use --method DOP853)")
         from mechsys.numeric.parallel import cores  # (not at import: a warm run loads libraries, builds none)
@@ -533,30 +551,35 @@ class Program:
 
 
 def load_program(key: str, source: Optional[str], functions: dict[str, int], n_args: int) -> Optional[Program]:
-    """The compiled program ``key`` from the cache (signature verified) or built from ``source`` now; None without
-    a compiler, without source, or when compiling fails (the caller keeps its Python code)."""
+    """The compiled program ``key`` from the cache (signature verified) or built from ``source`` now by the quick
+    compiler (compiler() when that fails); None without a compiler, without source, or when compiling fails (the
+    caller keeps its Python code)."""
     from mechsys.numeric import cache
 
-    if compiler() is None or source is None:
+    quick = quick_compiler()
+    if quick is None or source is None:
         return None
     import hashlib
 
-    # machine code: the key names the platform, and the source itself (so it always matches the Python code)
+    # machine code: the key names the platform, the compiler, and the source itself (so it always matches the
+    # Python code)
     digest = hashlib.sha256(source.encode()).hexdigest()[:16]
-    key = f"{key}-{sys.platform}-{platform.machine()}-{digest}"
+    key = f"{key}-{sys.platform}-{platform.machine()}-{Path(quick).name}-{digest}"
     path = cache.library(key)
     if path is not None:
         return Program(path, functions, n_args)
-    try:
-        with tempfile.TemporaryDirectory(prefix="mechsys-program-") as tmp:
-            built = Path(tmp) / f"{key}.so"
-            # straight-line code: -O0 compiles the bicycle's pieces in a second, -O2 in half a minute, and runs
-            # them as fast (the time goes to the call and the memory traffic)
-            build(source, built, "-O0")
-            path = cache.store_library(key, built)
-            return Program(path or built, functions, n_args)  # loaded before the temporary folder goes
-    except (AnalysisError, OSError):
-        return None
+    with tempfile.TemporaryDirectory(prefix="mechsys-program-") as tmp:
+        built = Path(tmp) / f"{key}.so"
+        # straight-line code: -O0 compiles the bicycle's pieces in a second (tcc: 0.015 s), -O2 in half a minute,
+        # and runs them as fast (the time goes to the call and the memory traffic)
+        for cc in dict.fromkeys((quick, compiler())):
+            try:
+                build(source, built, "-O0", cc)
+                path = cache.store_library(key, built)
+                return Program(path or built, functions, n_args)  # loaded before the temporary folder goes
+            except (AnalysisError, OSError):
+                continue
+    return None
 
 
 # ----------------------------------------------------------------------------------------- the compiled Newton

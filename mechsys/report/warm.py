@@ -7,8 +7,8 @@ info's facts (analysis/facts.py `Info`, rendered again in the format asked), the
 `equilibria` and `modes` (rendered again, so a text table fits the terminal). The key is the file's bytes, the
 command, every option that shapes the output (the `--set` assignments in their order), mechsys's version, the source
 of the whole package and the versions of sympy, numpy and scipy (a printer or a rank decision may change with them),
-and for the numeric commands the C compiler used (none, or MECHSYS_NATIVE=off: the Python path, whose last digits
-may differ). Entries are signed like every cache entry (numeric/cache.py) and checked for their shape. Commands that
+and for the numeric commands the C compilers used (none, or MECHSYS_NATIVE=off: the Python path, whose last digits
+may differ; and the quick compiler of the straight-line programs). Entries are signed like every cache entry (numeric/cache.py) and checked for their shape. Commands that
 fail, that verify or draw (`derive --check`, `equilibria --verify`, `--plot`) and runs with the cache off are never
 stored or read. Imports nothing heavy."""
 from __future__ import annotations
@@ -104,10 +104,11 @@ def load_info(key: str | None):
 
 
 def numeric_path() -> dict[str, Any]:
-    """What decides the numeric path of an analysis (an option of its key): the C compiler, or None."""
+    """What decides the numeric path of an analysis (an option of its key): the C compiler (None: the Python
+    path) and the quick compiler of the straight-line programs."""
     from mechsys.numeric import native
 
-    return {"compiler": native.compiler()}
+    return {"compiler": native.compiler(), "quick": native.quick_compiler()}
 
 
 def _cell(x: Any) -> Any:
