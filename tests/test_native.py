@@ -455,3 +455,31 @@ def test_programs_are_built_by_the_quick_compiler_else_by_the_c_compiler(tmp_pat
     started.clear()
     native.load_program("quick-test", source, {"f": 1}, 2)
     assert started == []  # from the cache
+
+
+def test_outputs_that_are_numbers_are_filled_in_not_stored_one_by_one(tmp_path):
+    """pieces_source writes the outputs that are numbers by one memset (zeros) and a loop over a table (the
+    others), before the other outputs' stores and after every shared subexpression (gcc -O2 spent 8.3 of 8.3 s on
+    the 40-link chain's 8,520 number stores); every output gets its value, numbers and expressions alike."""
+    import ctypes
+    import math
+
+    import sympy as sp
+
+    t, q0, u0, p0 = sp.symbols("t q0 u0 p0")
+    block = [sp.Integer(0), sp.Integer(1), sp.Integer(-1), u0 * q0, sp.Integer(0), sp.Float(2.5),
+             sp.Rational(1, 2), sp.sin(q0) + p0, sp.Integer(0), sp.sin(q0) * u0]
+    source = native.pieces_source([block, [sp.Integer(0), q0 + u0]], t, [q0], [u0], [p0], name="f", linkage="void")
+    body = source[source.index("void f("):]
+    assert body.count("out[") == 6 and "memset(out, 0, 12 * sizeof(double));" in body
+    assert body.index("memset") > body.rindex("const double") and body.index("memset") < body.index("out[3] =")
+    path = tmp_path / "f.so"
+    native.build("#include <math.h>\n#include <string.h>\n" + source, path, "-O2")
+    f = ctypes.CDLL(str(path)).f
+    f.argtypes = [ctypes.c_double] + [ctypes.c_void_p] * 4
+    q, u, p = np.array([0.3]), np.array([-1.7]), np.array([2.0])
+    out = np.full(12, np.nan)
+    f(0.0, q.ctypes.data, u.ctypes.data, p.ctypes.data, out.ctypes.data)
+    x, v, c = 0.3, -1.7, 2.0
+    expected = [0.0, 1.0, -1.0, v * x, 0.0, 2.5, 0.5, math.sin(x) + c, 0.0, math.sin(x) * v, 0.0, x + v]
+    assert out.tolist() == expected
