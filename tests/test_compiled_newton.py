@@ -159,3 +159,25 @@ def test_a_process_forked_during_the_build_does_not_wait_for_it(monkeypatch, tmp
             os._exit(0 if native.newton_library() is not None else 1)
     _, status = os.waitpid(pid, 0)
     assert os.waitstatus_to_exitcode(status) == 0
+
+
+def test_the_deflations_angle_wrapping_is_numpys_remainder_bit_for_bit():
+    """equilibria._wrap (fmod, then the divisor added where negative) gives remainder(d + pi, 2 pi) - pi bit for
+    bit: random distances, multiples of pi and 2 pi and their neighbours, zeros of both signs, subnormals, huge
+    values, infinities and nan; in place, on a whole array and on a gathered part."""
+    from mechsys.analysis.equilibrium.equilibria import _wrap
+
+    rng = np.random.default_rng(11)
+    base = np.concatenate([rng.uniform(-50, 50, 20_000), np.arange(-20, 21) * np.pi, np.arange(-20, 21) * 2 * np.pi,
+                           [0.0, -0.0, 1e-300, -1e-300, 5e-324, -5e-324, 1e300, -1e300, np.inf, -np.inf, np.nan]])
+    values = np.concatenate([base, base + np.pi, base - np.pi, np.nextafter(base, np.inf),
+                             np.nextafter(base, -np.inf)]).reshape(-1, 5)
+    with np.errstate(all="ignore"):
+        expected = np.remainder(values + np.pi, 2 * np.pi) - np.pi
+        wrapped = values.copy()
+        assert _wrap(wrapped) is wrapped
+        assert np.array_equal(wrapped.view(np.int64), expected.view(np.int64))
+        part = values.copy()
+        part[:, [0, 3]] = _wrap(part[:, [0, 3]])
+        assert np.array_equal(part[:, [0, 3]].view(np.int64), expected[:, [0, 3]].view(np.int64))
+        assert np.array_equal(part[:, [1, 2, 4]].view(np.int64), values[:, [1, 2, 4]].view(np.int64))
