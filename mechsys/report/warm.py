@@ -8,9 +8,9 @@ info's facts (analysis/facts.py `Info`, rendered again in the format asked), the
 command, every option that shapes the output (the `--set` assignments in their order), mechsys's version, the source
 of the whole package and the versions of sympy, numpy and scipy (a printer or a rank decision may change with them),
 and for the numeric commands the C compilers used (none, or MECHSYS_NATIVE=off: the Python path, whose last digits
-may differ; and the quick compiler of the straight-line programs). Entries are signed like every cache entry (numeric/cache.py) and checked for their shape. Commands that
-fail, that verify or draw (`derive --check`, `equilibria --verify`, `--plot`) and runs with the cache off are never
-stored or read. Imports nothing heavy."""
+may differ; and the quick compiler of the straight-line programs). Entries are signed like every cache entry
+(numeric/cache.py) and checked for their shape. Commands that fail, that verify or draw (`derive --check`,
+`equilibria --verify`, `--plot`) and runs with the cache off are never stored or read. Imports nothing heavy."""
 from __future__ import annotations
 
 import hashlib
