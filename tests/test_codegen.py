@@ -375,6 +375,28 @@ def test_generated_c_agrees_with_mechsys(name, tmp_path):
     check_against_reference(results, Reference(model), samples, TOLERANCE)
 
 
+@needs_cc
+def test_only_the_jacobian_is_built_unoptimised_and_opting_out_gives_the_same_linearization(tmp_path, monkeypatch):
+    """residual_jacobian (run once per linearization) carries gcc's optimize("O0") through a macro, no other
+    function does; built with -D<P>_OPTIMIZE_JACOBIAN (every function at -O2) the linearization is the same."""
+    model, pkg = bundled("slider_crank")
+    folder = write(pkg, "c", tmp_path / "pkg")
+    source = (folder / f"{pkg.prefix}.c").read_text()
+    P = pkg.prefix.upper()
+    marked = re.findall(rf"^{P}_ONCE_PER_LINEARIZATION void (\w+)\(", source, re.M)
+    assert marked == [f"{pkg.prefix}_residual_jacobian"]
+    assert f'#define {P}_ONCE_PER_LINEARIZATION __attribute__((optimize("O0")))' in source
+    samples = states(pkg.n)
+    unoptimised = CPackage(pkg, folder).evaluate(samples)
+    monkeypatch.setattr(sys.modules[__name__], "CFLAGS", CFLAGS + [f"-D{P}_OPTIMIZE_JACOBIAN"])
+    copy = tmp_path / "optimised"
+    shutil.copytree(folder, copy)
+    optimised = CPackage(pkg, copy).evaluate(samples)
+    for a, b in zip(unoptimised, optimised):
+        for key in ("linear_A", "linear_B"):
+            assert np.allclose(a[key], b[key], rtol=1e-13, atol=1e-13)
+
+
 @pytest.mark.slow
 @needs_octave
 @pytest.mark.parametrize("name", LIGHT)

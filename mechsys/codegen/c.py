@@ -35,12 +35,33 @@ def _signature(pkg: Package, name: str, args: tuple[str, ...], result: str = "do
     return f"{pkg.prefix}_{name}({', '.join(params + [result])})"
 
 
+#: functions run once per linearization, not per step, that gcc builds without optimisation (_UNOPTIMIZED)
+_ONCE = ("residual_jacobian",)
+
+
+def _unoptimized(pkg: Package) -> str:
+    """The macro before the _ONCE functions: gcc at -O2 spends nearly all of a large model's build allocating the
+    registers of residual_jacobian (thousands of temporaries; the bicycle: 48 of 51 s), which runs once per
+    linearization; its optimize attribute builds that one function as -O0 would (2.5 s in all). Not clang's (it
+    has no such attribute); defining <P>_OPTIMIZE_JACOBIAN optimises it with the rest."""
+    P = pkg.prefix.upper()
+    return f"""/* {pkg.prefix}_residual_jacobian runs once per linearization, not per step: gcc builds it unoptimised
+   (at -O2 its register allocation is most of the build).
+   Define {P}_OPTIMIZE_JACOBIAN to optimise it too. */
+#if defined(__GNUC__) && !defined(__clang__) && !defined({P}_OPTIMIZE_JACOBIAN)
+#define {P}_ONCE_PER_LINEARIZATION __attribute__((optimize("O0")))
+#else
+#define {P}_ONCE_PER_LINEARIZATION
+#endif"""
+
+
 def _function(pkg: Package, fn: Function) -> str:
     lines, outputs = function_body(pkg, fn, STYLE)
     unused = "    " + " ".join(f"(void){a};" for a in fn.args)
     body = [f"    out[{k}] = {value};" for k, value in enumerate(outputs)]
-    return "\n".join([f"/* {fn.summary} */", f"void {_signature(pkg, fn.name, fn.args)} {{", unused, *lines, *body,
-                      "}"])
+    once = f"{pkg.prefix.upper()}_ONCE_PER_LINEARIZATION " if fn.name in _ONCE else ""
+    return "\n".join([f"/* {fn.summary} */", f"{once}void {_signature(pkg, fn.name, fn.args)} {{", unused, *lines,
+                      *body, "}"])
 
 
 def _shape(fn: Function) -> str:
@@ -154,6 +175,8 @@ def _source(pkg: Package) -> str:
 #include "{prefix}.h"
 
 {MATH_DEFINES}
+
+{_unoptimized(pkg)}
 
 #define {P}_NK ({P}_N + {P}_NC)
 
