@@ -15,8 +15,9 @@ $(STAMP): pyproject.toml
 	$(BIN)/python -m compileall -q mechsys
 	# optional: the Tiny C Compiler builds the steady-motion programs 50 times faster than gcc -O0, the same code
 	# (numeric/native.py quick_compiler); installed where Debian's apt-get may run, skipped elsewhere
-	@command -v tcc >/dev/null 2>&1 || DEBIAN_FRONTEND=noninteractive apt-get install -y -qq tcc >/dev/null 2>&1 \
-		|| (apt-get update -qq >/dev/null 2>&1 && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq tcc >/dev/null 2>&1) \
+	@command -v tcc >/dev/null 2>&1 || DEBIAN_FRONTEND=noninteractive timeout 300 apt-get install -y -qq tcc >/dev/null 2>&1 \
+		|| (timeout 300 apt-get update -qq >/dev/null 2>&1 \
+			&& DEBIAN_FRONTEND=noninteractive timeout 300 apt-get install -y -qq tcc >/dev/null 2>&1) \
 		|| echo "note: tcc not installed (optional; 'apt-get install tcc' makes a first equilibria/modes on a constrained model faster)"
 	touch $(STAMP)
 

@@ -190,14 +190,18 @@ def test_the_numeric_commands_key_follows_the_options_and_the_numeric_path(tmp_p
     for extra in (["--set", "Mo=30"], ["--search", "beta=-1:1"], ["--linearize"], ["--hurwitz"], ["-f", "csv"]):
         assert _cli(monkeypatch, tmp_path / "cache", "equilibria", model, "-f", "markdown", *extra) != first
     monkeypatch.setenv("MECHSYS_NATIVE", "off")  # the Python path: another key (its last digits may differ)
-    assert warm.numeric_path() == {"compiler": None}
+    assert warm.numeric_path() == {"compiler": None, "quick": None}
     base = {"set": [], "format": "json"}
     keys = {warm.output_key("modes", model, {**base, **warm.numeric_path()})}
     monkeypatch.delenv("MECHSYS_NATIVE")
     keys.add(warm.output_key("modes", model, {**base, **warm.numeric_path()}))
+    monkeypatch.setenv("MECHSYS_QUICK_CC", "off")  # the steady-motion pieces built by the C compiler, not tcc
+    keys.add(warm.output_key("modes", model, {**base, **warm.numeric_path()}))
+    monkeypatch.delenv("MECHSYS_QUICK_CC")
     from mechsys.numeric import native
 
-    assert len(keys) == (2 if native.compiler() is not None else 1)
+    cc = native.compiler()
+    assert len(keys) == (1 if cc is None else 2 if native.quick_compiler() == cc else 3)
 
 
 def test_kept_tables_read_back_as_printed_and_damaged_ones_are_ignored(tmp_path, monkeypatch):
