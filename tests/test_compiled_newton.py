@@ -113,17 +113,23 @@ def test_positions_out_of_range_are_refused():
 
 def test_a_stored_search_is_kept_per_numeric_path(tmp_path, monkeypatch):
     """The compiled loop and the Python loop differ in round-off, so their searches are stored apart: a search
-    made with a C compiler is not read back under MECHSYS_NATIVE=off (the cache rule: the key covers the code)."""
+    made with a C compiler is not read back under MECHSYS_NATIVE=off (the cache rule: the key covers the code),
+    nor one whose pieces another compiler built (MECHSYS_QUICK_CC=off: gcc instead of tcc)."""
     monkeypatch.setenv("MECHSYS_CACHE", str(tmp_path))
     keys = {}
-    for path in ("compiled", "python"):
+    for path in ("compiled", "compiled by the C compiler", "python"):
+        if path == "compiled by the C compiler":
+            monkeypatch.setenv("MECHSYS_QUICK_CC", "off")
         if path == "python":
             monkeypatch.setenv("MECHSYS_NATIVE", "off")
         problem = NonholonomicProblem(mechsys.load(SYSTEMS_DIR / "rolling_disk.yaml"))
-        assert problem.newton_path == path
+        assert problem.newton_path == ("python" if path == "python"
+                                       else f"compiled-{Path(native.quick_compiler()).name}")
         p = eqm.parameter_values(problem.model)
         keys[path] = eqm._disk_key(problem, (np.asarray(p).tobytes(), (), (), "[]", 40, "{}", 0))
     assert None not in keys.values() and keys["compiled"] != keys["python"]
+    quick_differs = native.shutil.which("tcc") is not None
+    assert len(set(keys.values())) == (3 if quick_differs else 2)
 
 
 def test_the_library_built_beside_other_work_is_built_once(monkeypatch, tmp_path):

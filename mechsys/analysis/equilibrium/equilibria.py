@@ -584,7 +584,7 @@ def _disk_key(problem: EquilibriumProblem, key: tuple) -> str | None:
                "initial_rate": sorted((str(k), float(v)) for k, v in model.doc.initial_rate.items()),
                "search": [key[0].hex(), *map(repr, key[1:])],
                # the compiled Newton (numeric/newton.c) and the Python loop differ in round-off, so a start may
-               # end at another root: the search is kept per numeric path
+               # end at another root: the search is kept per numeric path (and per compiler of the pieces)
                "newton": problem.newton_path}
     return hashlib.sha256(json.dumps(payload).encode()).hexdigest()[:32]
 

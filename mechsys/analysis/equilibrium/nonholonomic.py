@@ -24,6 +24,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from functools import cached_property
+from pathlib import Path
 
 import numpy as np
 import sympy as sp
@@ -487,7 +488,8 @@ class NonholonomicProblem(EquilibriumProblem):
 
     @property
     def newton_path(self) -> str:
-        return "compiled" if self._compiled is not None else "python"
+        """"python", or "compiled" and the compiler of the pieces' program (native.quick_compiler)."""
+        return f"compiled-{Path(native.quick_compiler()).name}" if self._compiled is not None else "python"
 
     @property
     def _compiled(self):
