@@ -431,8 +431,7 @@ def test_programs_are_built_by_the_quick_compiler_else_by_the_c_compiler(tmp_pat
     """load_program builds with quick_compiler() (tcc when there is one), keys the library by that compiler, and
     when it fails builds with compiler() instead; MECHSYS_QUICK_CC=off takes compiler()."""
     monkeypatch.setenv("MECHSYS_CACHE", str(tmp_path / "cache"))
-    source = "void f(const double *a, double *out) { out[0] = a[0] * a[1] + sin(a[0]); }\n"
-    source = "#include <math.h>\n" + source
+    source = "#include <math.h>\nvoid f(const double *a, double *out) { out[0] = a[0] * a[1] + sin(a[0]); }\n"
     monkeypatch.setenv("MECHSYS_QUICK_CC", "off")
     assert native.quick_compiler() == native.compiler()
     failing = tmp_path / "failing-cc"

@@ -35,7 +35,7 @@ def _signature(pkg: Package, name: str, args: tuple[str, ...], result: str = "do
     return f"{pkg.prefix}_{name}({', '.join(params + [result])})"
 
 
-#: functions run once per linearization, not per step, that gcc builds without optimisation (_UNOPTIMIZED)
+#: functions run once per linearization, not per step, that gcc builds without optimisation (_unoptimized)
 _ONCE = ("residual_jacobian",)
 
 
