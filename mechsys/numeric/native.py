@@ -50,15 +50,24 @@ _STATUS = {-1: "the step size became too small",
            -5: budget_spent("native")}
 
 
+_OFF = ("off", "0", "false", "no")  # what MECHSYS_NATIVE and MECHSYS_QUICK_CC accept for "none"
+
+
+def _on_path(*names: Optional[str]) -> Optional[str]:
+    """The path of the first of ``names`` (empty ones skipped) found on PATH, or None."""
+    for name in names:
+        found = shutil.which(name) if name else None
+        if found:
+            return found
+    return None
+
+
 def compiler() -> Optional[str]:
     """The C compiler to use (MECHSYS_CC, then CC, then cc/gcc/clang), or None when there is none or
     MECHSYS_NATIVE=off."""
-    if os.environ.get("MECHSYS_NATIVE", "").lower() in ("off", "0", "false", "no"):
+    if os.environ.get("MECHSYS_NATIVE", "").lower() in _OFF:
         return None
-    for name in (os.environ.get("MECHSYS_CC"), os.environ.get("CC"), "cc", "gcc", "clang"):
-        if name and shutil.which(name):
-            return shutil.which(name)
-    return None
+    return _on_path(os.environ.get("MECHSYS_CC"), os.environ.get("CC"), "cc", "gcc", "clang")
 
 
 def quick_compiler() -> Optional[str]:
@@ -69,12 +78,9 @@ def quick_compiler() -> Optional[str]:
     bit gcc -O0's results on the bicycle, tests/test_native.py). Not for the integrator or newton.c (-O2)."""
     cc = compiler()
     choice = os.environ.get("MECHSYS_QUICK_CC", "")
-    if cc is None or choice.lower() in ("off", "0", "false", "no"):
+    if cc is None or choice.lower() in _OFF:
         return cc
-    for name in (choice, "tcc"):
-        if name and shutil.which(name):
-            return shutil.which(name)
-    return cc
+    return _on_path(choice, "tcc") or cc
 
 
 def _c_printer(names: dict, fast: bool = True):
