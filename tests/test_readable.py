@@ -441,3 +441,132 @@ def test_a_sum_divided_by_its_content_is_the_sum_sympy_builds():
             got = rd._divided(base, split, number)
             want = sp.Add(*[c / number * rest for c, rest in split])
             assert got == want and got.args == want.args, (base, number)
+
+
+# ------------------------------------------------------------------- the norms' trials, class by class
+def _whole_trials(monkeypatch) -> None:
+    """Every norms trial built as the whole sum (the reference the signature classes must reproduce)."""
+    monkeypatch.setattr(rd._Classes, "of", classmethod(lambda cls, *args: None))
+
+
+def _cleaned(eq: Equations) -> tuple:
+    cleanup = rd.readable(eq)
+    return cleanup.spent, cleanup.partly_cleaned, [sp.srepr(e) for e in entries(cleanup.equations)]
+
+
+def _chain(n: int, tmp_path: Path) -> Path:
+    """The n-link planar pendulum of rods of benchmarks/derive_chain.py, as a model file."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("derive_chain", Path(__file__).parents[1] / "benchmarks" / "derive_chain.py")
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    path = tmp_path / f"chain{n}.yaml"
+    path.write_text(bench.chain_yaml(n), encoding="utf-8")
+    return path
+
+
+@pytest.mark.parametrize("name", ["chain", "rolling_disk", "gyrostabilizer", "wheel_on_axle"])
+def test_the_norms_trials_by_signature_class_give_what_the_whole_sums_give(name, tmp_path, monkeypatch):
+    """_Classes computes a norms trial class by class (pythagoras never joins terms of different signatures);
+    the clean-up must be the one of whole-sum trials: the same expressions (srepr) and the same visits."""
+    model = mechsys.load(_chain(6, tmp_path)) if name == "chain" else load_system(name)
+    used = []
+    real = rd._Classes.of.__func__
+    monkeypatch.setattr(rd._Classes, "of", classmethod(lambda cls, *a: used.append(1) or real(cls, *a)))
+    for method in ("kane", "lagrange"):
+        eq = model.equations(method)
+        by_class = _cleaned(eq)
+        with monkeypatch.context() as whole:
+            _whole_trials(whole)
+            assert _cleaned(eq) == by_class, method
+    assert used  # the split was taken
+
+
+def test_random_sums_give_the_same_norms_by_class_and_whole(monkeypatch):
+    """Sums of squared and multiplied small trigonometric sums, with rational and float coefficients, cofactors
+    and plain terms: each sum's norms the same by class as whole (float coefficients add in Add.flatten's order),
+    and the split taken in most of them."""
+    a, b, c, s, m, x, y = sp.symbols("a b c s m x y")
+    rng = random.Random(3)
+    trig = [sp.cos(x), sp.sin(x), sp.cos(y), sp.sin(y), sp.cos(x + y), sp.sin(x + y)]
+    cofactors = [sp.Integer(1), a, c, s, m * a]
+    numbers = [sp.Integer(1), sp.Integer(-1), sp.Rational(1, 2), sp.Integer(2), sp.Float(0.1), sp.Float(-0.3)]
+
+    def small_sum():
+        return sp.Add(*(rng.choice(numbers) * rng.choice(cofactors) * f for f in rng.sample(trig, rng.randint(2, 3))))
+
+    def term():
+        kind = rng.randrange(4)
+        if kind == 0:
+            return rng.choice(numbers) * rng.choice(cofactors) * small_sum() ** 2
+        if kind == 1:
+            return rng.choice(numbers) * rng.choice(cofactors) * small_sum() * small_sum()
+        if kind == 2:
+            return rng.choice(numbers) * rng.choice(cofactors) * rng.choice(trig) ** 2
+        return rng.choice(numbers) * rng.choice(cofactors) * rng.choice(trig)
+
+    split = 0
+    for _ in range(150):
+        add = sp.Add(*(term() for _ in range(rng.randint(3, 7))))
+        split += rd._Classes.of(add, {}, rd._Cleaner(rd._Work(10**6))) is not None if add.is_Add else 0
+        got = rd._Cleaner(rd._Work(10**6))._norms(add)
+        with monkeypatch.context() as whole:
+            _whole_trials(whole)
+            want = rd._Cleaner(rd._Work(10**6))._norms(add)
+        assert sp.srepr(got) == sp.srepr(want), add
+    assert split > 75
+
+
+def test_every_trial_by_class_is_the_whole_trial():
+    """Every subset of multiplied-out products of random sums whose like terms meet from several products with
+    float coefficients (added in Add.flatten's order, which is not associative): the same trial by class as whole
+    (None or not, the size, the expression) and the size that of the expression."""
+    a, x, y = sp.symbols("a x y")
+    rng = random.Random(11)
+    floats = [sp.Float(v) for v in (0.1, 0.3, -0.3)]
+    trig = [sp.cos(x), sp.sin(x), sp.cos(y)]
+    c, s = sp.symbols("c s")
+    norm = (c * sp.cos(y) - s * sp.sin(y)) ** 2 + (c * sp.sin(y) + s * sp.cos(y)) ** 2
+    unit = (sp.cos(x) * sp.cos(y) - sp.sin(x) * sp.sin(y)) ** 2 + (sp.cos(x) * sp.sin(y) + sp.sin(x) * sp.cos(y)) ** 2
+    fixed = [unit, norm - c ** 2 - s ** 2, norm - s ** 2]  # results of one term and of none
+
+    def small():
+        return sp.Add(*(rng.choice(floats) * f for f in rng.sample(trig, 2)))
+
+    def random_sum():
+        terms = [rng.choice([1, a]) * rng.choice(floats) * small() ** 2 for _ in range(3)]
+        return sp.Add(*terms, *(rng.choice([1, a]) * rng.choice(floats) * rng.choice(trig) ** 2 for _ in range(3)))
+
+    compared = 0
+    for add in fixed + [random_sum() for _ in range(150)]:
+        cleaner = rd._Cleaner(rd._Work(10**6))
+        expanded = {t: cleaner._products(t) for t in add.args if 1 < cleaner._count(t) <= rd._NORM_PRODUCTS}
+        by_class = rd._Classes.of(add, expanded, cleaner)
+        if by_class is None:
+            continue
+        whole = rd._Whole(add, expanded, cleaner)
+        for k in range(len(expanded) + 1):
+            for chosen in itertools.combinations(expanded, k):
+                got, want = by_class.result(set(chosen)), whole.result(set(chosen))
+                assert (got is None) == (want is None), (add, chosen)
+                if got is not None:
+                    assert sp.srepr(got.expr()) == sp.srepr(want.expr()), (add, chosen)
+                    assert got.size == want.size == cleaner.size(got.expr())
+                    compared += 1
+    assert compared > 50
+
+
+def test_a_lone_sum_cofactor_takes_the_whole_sums(monkeypatch):
+    """(a + b)*sin(x)**2 + (a + b)*cos(x)**2 gives 1*(a + b), which Add spreads into a and b: terms of other
+    signatures (here -a's). Such a sum is not split (split anyway, its classes' sizes would be wrong and the
+    norms left out)."""
+    a, b, x, y = sp.symbols("a b x y")
+    add = (a + b) * (sp.sin(x) + sp.sin(y)) ** 2 + (a + b) * (sp.cos(x) + sp.cos(y)) ** 2 - a
+    cleaner = rd._Cleaner(rd._Work(10**6))
+    expanded = {t: cleaner._products(t) for t in add.args if cleaner._count(t) > 1}
+    assert rd._Classes.of(add, expanded, cleaner) is None
+    want = a + 2 * b + sp.Mul(2, a + b, sp.sin(x), sp.sin(y)) + sp.Mul(2, a + b, sp.cos(x), sp.cos(y))
+    assert cleaner._norms(add) == want
+    monkeypatch.setattr(rd, "_lone_sum", lambda signature: False)
+    assert rd._Cleaner(rd._Work(10**6))._norms(add) != want

@@ -393,7 +393,9 @@ class _Cleaner:
     def _norms(self, add: sp.Expr) -> sp.Expr:
         """Multiply out the small trigonometric products of a sum when the identities then make it smaller:
         (c*cos(y) - s*sin(y))**2 + (c*sin(y) + s*cos(y))**2 -> c**2 + s**2. Greedy: each product stays
-        multiplied out only if that does not make the result larger."""
+        multiplied out only if that does not make the result larger. The trials are worked out class by class of
+        the terms' signatures where that holds (_Classes: a trial redoes only what its product touches), else
+        whole (_Whole); either gives the same result."""
         if not add.is_Add or len(add.args) > _NORM_SUM_TERMS:
             return add
         candidates = [t for t in add.args if 1 < self._count(t) <= _NORM_PRODUCTS][:_NORM_CANDIDATES]
@@ -402,24 +404,116 @@ class _Cleaner:
         if not _has_square_pair([m for t in add.args for m in self._monomials(t, t in candidates)]):
             return add
         expanded = {t: self._products(t) for t in candidates}
+        trials = _Classes.of(add, expanded, self) or _Whole(add, expanded, self)
         chosen = set(expanded)
-        best = self._with(add, expanded, chosen)
+        self.tick()
+        best = trials.result(chosen)
         if best is None:
             return add
         for term in candidates:  # in the sum's order: a set's order follows the process's string hashing
-            trial = self._with(add, expanded, chosen - {term})
-            if trial is not None and self.size(trial) <= self.size(best):
+            if chosen - {term}:
+                self.tick()  # one visit per trial, as many whichever way it is computed
+            trial = trials.result(chosen - {term})
+            if trial is not None and trial.size <= best.size:
                 chosen, best = chosen - {term}, trial
-        return best if self.size(best) < self.size(add) else add
+        return best.expr() if best.size < self.size(add) else add
 
-    def _with(self, add: sp.Expr, expanded: dict, chosen: set) -> sp.Expr | None:
-        """The sum with the chosen terms multiplied out and the identities applied; None if none applies."""
+
+# ------------------------------------------------------------------------------------- the norms' trials
+@dataclass
+class _Trial:
+    """A sum with some products multiplied out and the identities applied: its size, and how to build it."""
+
+    size: int
+    expr: Callable[[], sp.Expr]
+
+
+class _Whole:
+    """Each trial built whole: the sum with the chosen products multiplied out, then pythagoras."""
+
+    def __init__(self, add: sp.Expr, expanded: dict, cleaner: "_Cleaner") -> None:
+        self.add, self.expanded, self.size = add, expanded, cleaner.size
+
+    def result(self, chosen: set) -> _Trial | None:
+        """The trial; None if no identity applies (or nothing is multiplied out)."""
         if not chosen:
             return None
-        self.tick()
-        summed = sp.Add(*(expanded[t] if t in chosen else t for t in add.args))
+        summed = sp.Add(*(self.expanded[t] if t in chosen else t for t in self.add.args))
         result = pythagoras(summed)
-        return None if result is summed else result
+        return None if result is summed else _Trial(self.size(result), lambda: result)
+
+
+def _signature(term: sp.Expr) -> frozenset:
+    """What pythagoras keeps of a term: its factors other than sin and cos, with their powers, and the parity of
+    each sin and cos power. Merging like terms, sin(x)**2 + cos(x)**2 = 1 and its complements only ever join
+    terms of one signature and give terms of that signature."""
+    out = []
+    for base, exp in _monomial(term)[1].items():
+        if isinstance(base, _TRIG) and exp.is_Integer:
+            if exp % 2:
+                out.append((base, 1))
+        elif exp != 0:
+            out.append((base, exp))
+    return frozenset(out)
+
+
+def _lone_sum(signature: frozenset) -> bool:
+    """Whether a term's only factor other than sin and cos powers is a sum: once an identity takes them away,
+    number*(a + b) would multiply out into terms of other signatures."""
+    rest = [(b, e) for b, e in signature if not isinstance(b, _TRIG)]
+    return len(rest) == 1 and rest[0][0].is_Add and rest[0][1] == 1
+
+
+class _Classes:
+    """The trials computed signature by signature: pythagoras never joins terms of different signatures, so a
+    trial's result is the union of its signature classes' results, and a trial that multiplies out one product
+    other than the last one redoes only the classes that product's terms fall in. The same results as _Whole,
+    term for term (tests/test_readable.py compares the two)."""
+
+    def __init__(self, add: sp.Expr, expanded: dict, signatures: dict, cleaner: "_Cleaner") -> None:
+        self.add, self.expanded, self.signatures, self.size = add, expanded, signatures, cleaner.size
+        self.touched = {t: {signatures[t], *(signatures[e] for e in sp.Add.make_args(x))}
+                        for t, x in expanded.items()}
+        self.done: dict[tuple, tuple[bool, tuple, int]] = {}
+
+    @classmethod
+    def of(cls, add: sp.Expr, expanded: dict, cleaner: "_Cleaner") -> "_Classes | None":
+        """The split of this sum, or None when it may not hold (a lone sum factor) or would not help (one class)."""
+        terms = [*add.args, *(e for x in expanded.values() for e in sp.Add.make_args(x))]
+        signatures = {t: _signature(t) for t in terms}
+        if len(set(signatures.values())) < 2 or any(_lone_sum(s) for s in signatures.values()):
+            return None
+        return cls(add, expanded, signatures, cleaner)
+
+    def _sequence(self, chosen: set) -> list[sp.Expr]:
+        """The terms in the order Add.flatten meets them in the whole sum: a multiplied-out product that is a
+        sum is met after the other terms (float coefficients add in the same order)."""
+        now, later = [], []
+        for t in self.add.args:
+            x = self.expanded[t] if t in chosen else t
+            (later.extend(x.args) if x.is_Add and t in chosen else now.append(x))
+        return now + later
+
+    def _class(self, signature: frozenset, chosen: set, sequence: list) -> tuple[bool, tuple, int]:
+        """(whether an identity applied, the terms of the result, their total size) of one class."""
+        key = (signature, frozenset(t for t in chosen if signature in self.touched[t]))
+        if key not in self.done:
+            summed = sp.Add(*(e for e in sequence if self.signatures[e] == signature))
+            result = pythagoras(summed)
+            terms = () if result == 0 else sp.Add.make_args(result)
+            self.done[key] = (result is not summed, terms, sum(self.size(e) for e in terms))
+        return self.done[key]
+
+    def result(self, chosen: set) -> _Trial | None:
+        if not chosen:
+            return None
+        sequence = self._sequence(chosen)
+        classes = [self._class(s, chosen, sequence) for s in dict.fromkeys(self.signatures[e] for e in sequence)]
+        if not any(changed for changed, _, _ in classes):
+            return None
+        count = sum(len(terms) for _, terms, _ in classes)
+        size = sum(size for _, _, size in classes) + (count >= 2) + (count == 0)
+        return _Trial(size, lambda: sp.Add(*(e for _, terms, _ in classes for e in terms)))
 
 
 # ------------------------------------------------------------------------------------------------ equations
