@@ -36,6 +36,18 @@ def load_data(name: str, overrides: Mapping[str, object] | None = None):
     return _load_cached(str(DATA_DIR / f"{name}.yaml"), tuple(sorted((overrides or {}).items())))
 
 
+def chain_file(n: int, folder: Path) -> Path:
+    """The n-link planar pendulum of rods of benchmarks/derive_chain.py, written as a model file in ``folder``."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("derive_chain", ROOT / "benchmarks" / "derive_chain.py")
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    path = folder / f"chain{n}.yaml"
+    path.write_text(bench.chain_yaml(n), encoding="utf-8")
+    return path
+
+
 def sym(model, name: str) -> sp.Symbol:
     """The sympy symbol of parameter ``name``."""
     return model.doc.parameters[name]

@@ -331,15 +331,13 @@ def test_the_fast_c_printer_computes_what_sympys_printer_computes(tmp_path):
 def test_c_source_reuses_the_python_codes_cse(monkeypatch):
     """A first `simulate` prints the staged equations and the constraint rows as Python and as C: one CSE each
     (lambdify.shared_cse), not one per language. The C source from the memo equals the one computed afresh."""
-    import sympy as sp
-
     from mechsys.numeric import lambdify
 
     model = mechsys.load(SYSTEMS_DIR / "rolling_disk.yaml")
     monkeypatch.setattr(lambdify, "_RECENT", lambdify.OrderedDict())
     calls = []
-    real = sp.cse
-    monkeypatch.setattr(sp, "cse", lambda exprs, **kw: calls.append(len(exprs)) or real(exprs, **kw))
+    real = lambdify.cse
+    monkeypatch.setattr(lambdify, "cse", lambda exprs, **kw: calls.append(len(exprs)) or real(exprs, **kw))
     first = native.model_source(model)
     assert len(calls) == 3  # the staged pieces, A, b
     args = (model.t, model.q, model.u, model.parameter_symbols)

@@ -14,7 +14,7 @@ import sympy as sp
 from typer.testing import CliRunner
 
 import mechsys
-from helpers import SYSTEMS_DIR, load_system
+from helpers import SYSTEMS_DIR, chain_file, load_system
 from mechsys.cli import app
 from mechsys.mechanics.model import Equations
 from mechsys.report import readable as rd
@@ -454,23 +454,11 @@ def _cleaned(eq: Equations) -> tuple:
     return cleanup.spent, cleanup.partly_cleaned, [sp.srepr(e) for e in entries(cleanup.equations)]
 
 
-def _chain(n: int, tmp_path: Path) -> Path:
-    """The n-link planar pendulum of rods of benchmarks/derive_chain.py, as a model file."""
-    import importlib.util
-
-    spec = importlib.util.spec_from_file_location("derive_chain", Path(__file__).parents[1] / "benchmarks" / "derive_chain.py")
-    bench = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(bench)
-    path = tmp_path / f"chain{n}.yaml"
-    path.write_text(bench.chain_yaml(n), encoding="utf-8")
-    return path
-
-
 @pytest.mark.parametrize("name", ["chain", "rolling_disk", "gyrostabilizer", "wheel_on_axle"])
 def test_the_norms_trials_by_signature_class_give_what_the_whole_sums_give(name, tmp_path, monkeypatch):
     """_Classes computes a norms trial class by class (pythagoras never joins terms of different signatures);
     the clean-up must be the one of whole-sum trials: the same expressions (srepr) and the same visits."""
-    model = mechsys.load(_chain(6, tmp_path)) if name == "chain" else load_system(name)
+    model = mechsys.load(chain_file(6, tmp_path)) if name == "chain" else load_system(name)
     used = []
     real = rd._Classes.of.__func__
     monkeypatch.setattr(rd._Classes, "of", classmethod(lambda cls, *a: used.append(1) or real(cls, *a)))

@@ -12,6 +12,7 @@ from mechsys.codegen.folder import MARKER, check_destination, write_directory  #
 from mechsys.codegen.names import MODULES, mangle
 from mechsys.errors import AnalysisError, InputError
 from mechsys.mechanics.products import product
+from mechsys.numeric.cse import cse
 from mechsys.numeric.lambdify import ForwardProgram, compile_program, differentiate_program, shared_program
 from mechsys.numeric.runtime import call_generated
 
@@ -39,7 +40,7 @@ class Program:
     @classmethod
     def of(cls, exprs: Sequence[sp.Expr]) -> "Program":
         """``exprs`` after one common-subexpression elimination over all of them."""
-        replacements, reduced = sp.cse([sp.sympify(e) for e in exprs], order="none")
+        replacements, reduced = cse([sp.sympify(e) for e in exprs], order="none")
         return cls(list(replacements), list(reduced))
 
     @classmethod

@@ -14,6 +14,7 @@ from sympy.printing.pycode import PythonCodePrinter
 
 from mechsys.mechanics.dag import FreeSymbols
 from mechsys.mechanics.differentiate import Differentiator
+from mechsys.numeric.cse import cse
 from mechsys.numeric.runtime import StateFunction, function_from_source, matrix_from_source
 
 __all__ = ["generate_source", "shared_cse", "compile_exprs", "matrix_source", "compile_matrix", "function_from_source",
@@ -102,7 +103,7 @@ def shared_cse(exprs: Sequence[sp.Expr], light: bool = False) -> tuple[list, lis
     key = (tuple(exprs), light)
     out = _RECENT.get(key)
     if out is None:
-        out = _RECENT[key] = light_cse(exprs) if light else sp.cse(exprs, order="none")
+        out = _RECENT[key] = light_cse(exprs) if light else cse(exprs, order="none")
         if len(_RECENT) > _RECENT_SIZE:
             _RECENT.popitem(last=False)
     return out
@@ -172,7 +173,7 @@ def shared_program(exprs: Sequence[sp.Expr], args: Sequence[sp.Symbol],
     # FreeSymbols: free_symbols walks every path of a DAG (the bicycle's pieces: 0.47 s instead of 0.02 s)
     taken = set(FreeSymbols().of_all(exprs)).union(args, wrt)
     names = sp.numbered_symbols("x", real=True, exclude=taken)
-    replacements, reduced = light_cse(exprs, names) if light else sp.cse(exprs, symbols=names, order="none")
+    replacements, reduced = light_cse(exprs, names) if light else cse(exprs, symbols=names, order="none")
     program = ForwardProgram(list(args), [], [], {}, list(reduced), [])
     for k, (sym, value) in enumerate(replacements):
         program.symbols[f"x{k}"] = sym

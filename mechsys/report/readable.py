@@ -349,7 +349,7 @@ class _Cleaner:
             new = self._norms(new) if self.norms else new
         elif (new.is_Mul or new.is_Pow) and redo:
             new = tidy_signs(new, self.factors)
-        return node if new in _UNDEFINED and node not in _UNDEFINED else new
+        return node if new.is_Atom and new in _UNDEFINED and node not in _UNDEFINED else new
 
     def _expandable(self, factor: sp.Expr) -> int:
         """How many terms the factor contributes when multiplied out (1: it stays as it is)."""
@@ -399,9 +399,10 @@ class _Cleaner:
         if not add.is_Add or len(add.args) > _NORM_SUM_TERMS:
             return add
         candidates = [t for t in add.args if 1 < self._count(t) <= _NORM_PRODUCTS][:_NORM_CANDIDATES]
-        if not candidates or not _may_pair(add.args, set(candidates)):
+        wanted = set(candidates)  # looked up by hash: a list compares unequal terms through their trees
+        if not candidates or not _may_pair(add.args, wanted):
             return add
-        if not _has_square_pair([m for t in add.args for m in self._monomials(t, t in candidates)]):
+        if not _has_square_pair([m for t in add.args for m in self._monomials(t, t in wanted)]):
             return add
         expanded = {t: self._products(t) for t in candidates}
         trials = _Classes.of(add, expanded, self) or _Whole(add, expanded, self)
