@@ -149,3 +149,29 @@ def test_the_direct_python_printer_computes_what_sympys_printer_computes():
             assert got[0] is not None and abs(got[0] - got[1]) <= 1e-9 * max(1.0, abs(got[1])), (exprs[k], got)
             compared += 1
     assert compared > 1000
+
+
+@pytest.mark.parametrize("target", ["python", "c", "matlab"])
+def test_the_lean_doprint_prints_what_sympys_doprint_prints(target):
+    """LeanDoprint skips sympy's re(...) rewrite where an expression has no re: the same text with and without it,
+    for an expression with re(UnevaluatedExpr(x)) (rewritten to x) and expressions without re."""
+    import sympy as sp
+    from sympy.printing.codeprinter import CodePrinter
+
+    from mechsys.codegen import matlab, python
+    from mechsys.numeric import native
+
+    x, y = sp.symbols("x y", real=True)
+    names = {x: "x", y: "y"}
+    printer = {"python": lambda: python._Printer(names), "c": lambda: native._c_printer(names, fast=False),
+               "matlab": lambda: matlab._Printer(names)}[target]()
+    exprs = [sp.re(sp.UnevaluatedExpr(x)) * y + sp.sin(x), sp.sin(x) ** 2 * y + sp.sqrt(y ** 2 + 1),
+             sp.Piecewise((x, y > 0), (-y, True))]
+    lean = [printer.doprint(e) for e in exprs]
+    plain = type(printer)._handle_UnevaluatedExpr
+    type(printer)._handle_UnevaluatedExpr = CodePrinter._handle_UnevaluatedExpr
+    try:
+        assert [printer.doprint(e) for e in exprs] == lean
+    finally:
+        type(printer)._handle_UnevaluatedExpr = plain
+    assert "re(" not in lean[0] and "x" in lean[0]

@@ -5,9 +5,10 @@ import sympy as sp
 from sympy.printing.octave import OctaveCodePrinter
 
 from mechsys.codegen.package import Function, Package, Style, function_body, readme
+from mechsys.numeric.lambdify import LeanDoprint
 
 
-class _Printer(OctaveCodePrinter):
+class _Printer(LeanDoprint, OctaveCodePrinter):
     """Octave/MATLAB expressions of scalars, with the package's identifiers and only core functions."""
 
     def __init__(self, names: dict) -> None:

@@ -36,6 +36,9 @@ class Program:
 
     assignments: list[tuple[sp.Symbol, sp.Expr]]
     outputs: list[sp.Expr]
+    #: expression -> its free symbols, shared by the functions cut from one CSE (each step's set found once, not
+    #: once per function and per question: sympy does not keep them)
+    uses: dict = field(default_factory=dict, compare=False, repr=False)
 
     @classmethod
     def of(cls, exprs: Sequence[sp.Expr]) -> "Program":
@@ -44,27 +47,32 @@ class Program:
         return cls(list(replacements), list(reduced))
 
     @classmethod
-    def part(cls, program: "ForwardProgram", outputs: Sequence[sp.Expr]) -> "Program":
+    def part(cls, program: "ForwardProgram", outputs: Sequence[sp.Expr], uses: dict | None = None) -> "Program":
         """``outputs`` (in terms of ``program``'s temporaries) with the temporaries of ``program`` they need: one
-        function of a package from the CSE all of them share."""
+        function of a package from the CSE all of them share (``uses``: the free symbols known so far)."""
         steps = [(program.symbols[name], value) for name, value in program.values + program.derivatives]
-        return cls(steps, list(outputs)).pruned()
+        return cls(steps, list(outputs), {} if uses is None else uses).pruned()
+
+    def _free(self, expr: sp.Expr) -> set:
+        found = self.uses.get(expr)
+        if found is None:
+            found = self.uses[expr] = sp.sympify(expr).free_symbols
+        return found
 
     def pruned(self) -> "Program":
         """Without the temporaries no output needs."""
-        needed: set = set().union(*(sp.sympify(e).free_symbols for e in self.outputs))
+        needed: set = set().union(*(self._free(e) for e in self.outputs))
         kept = []
         for sym, value in reversed(self.assignments):
             if sym in needed:
                 kept.append((sym, value))
-                needed |= value.free_symbols
-        return Program(kept[::-1], self.outputs)
+                needed |= self._free(value)
+        return Program(kept[::-1], self.outputs, self.uses)
 
     def inputs(self) -> set:
         """The symbols the program reads (not its own temporaries)."""
         assigned = {s for s, _ in self.assignments}
-        used = set().union(*(v.free_symbols for _, v in self.assignments),
-                           *(sp.sympify(e).free_symbols for e in self.outputs))
+        used = set().union(*(self._free(v) for _, v in self.assignments), *(self._free(e) for e in self.outputs))
         return used - assigned
 
 
@@ -289,15 +297,18 @@ def derive_package(model: "MechanicalModel", method: str = "lagrange") -> Packag
         parts.append(shared.outputs[start:start + len(block)])
         entries.append(as_named[start:start + len(block)])
         start += len(block)
-    add("mass_matrix", STATE_ARGS, (n, n), Program.part(shared, parts[0]), "mass matrix M")
-    add("forcing", STATE_ARGS, (n,), Program.part(shared, parts[1]), "forcing f (M q'' = f + A^T lam)")
+    uses: dict = {}  # the free symbols of the CSE's steps, for every function cut from it
+    add("mass_matrix", STATE_ARGS, (n, n), Program.part(shared, parts[0], uses), "mass matrix M")
+    add("forcing", STATE_ARGS, (n,), Program.part(shared, parts[1], uses), "forcing f (M q'' = f + A^T lam)")
     a = sp.Matrix(model.a)
     residual = list(product(sp.Matrix(n, n, entries[0]), a) - sp.Matrix(entries[1]))
     if m:
         holonomic = model.holonomic_constraints
         A = sp.Matrix(m, n, entries[2])
-        add("constraint_matrix", STATE_ARGS, (m, n), Program.part(shared, parts[2]), "constraint matrix A (A q'' = b)")
-        add("constraint_rhs", STATE_ARGS, (m,), Program.part(shared, parts[3]), "constraint right-hand side b")
+        add("constraint_matrix", STATE_ARGS, (m, n), Program.part(shared, parts[2], uses),
+            "constraint matrix A (A q'' = b)")
+        add("constraint_rhs", STATE_ARGS, (m,), Program.part(shared, parts[3], uses),
+            "constraint right-hand side b")
         add("constraint_velocity", STATE_ARGS, (m,), Program.of(list(model.constraint_velocity)),
             "velocity-level constraints A q' + a_t (zero on a consistent motion)")
         if len(holonomic):
@@ -309,7 +320,7 @@ def derive_package(model: "MechanicalModel", method: str = "lagrange") -> Packag
     add("potential_energy", STATE_ARGS, (), Program.of([eq.V]), "potential energy V")
     named.outputs = residual
     jac = differentiate_program(named, wrt)
-    add("residual_jacobian", ("t", "q", "u", "a", "lam", "p"), (n + m, 2 * n), Program.part(jac, jac.jacobian),
+    add("residual_jacobian", ("t", "q", "u", "a", "lam", "p"), (n + m, 2 * n), Program.part(jac, jac.jacobian, uses),
         "Jacobian d[M q'' - f - A^T lam; A q'' - b]/d[q, q'] at given q'' and lam (exact, symbolic)")
     return pkg
 

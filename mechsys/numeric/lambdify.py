@@ -22,7 +22,16 @@ __all__ = ["generate_source", "shared_cse", "compile_exprs", "matrix_source", "c
            "ForwardProgram", "shared_program", "differentiate_program", "compile_program"]
 
 
-class _Printer(PythonCodePrinter):
+class LeanDoprint:
+    """A sympy code printer's doprint that rewrites re(...) of an UnevaluatedExpr only where the expression has an
+    re(...): sympy's does it with a replace over the whole expression for every statement printed, which walks and
+    rebuilds each one (a quarter of the printing time of a long chain's generated package). The same text."""
+
+    def _handle_UnevaluatedExpr(self, expr):
+        return super()._handle_UnevaluatedExpr(expr) if expr.has(sp.re) else expr
+
+
+class _Printer(LeanDoprint, PythonCodePrinter):
     """Python source with positional argument names a0, a1, ... for the input symbols. Sums, products, powers and
     numbers are printed directly, in the expression's own argument order and fully parenthesized (sympy's
     printer orders the terms of every sum and weighs precedence: most of a generated source's printing time);

@@ -94,11 +94,13 @@ def _c_printer(names: dict, fast: bool = True):
     import sympy as sp
     from sympy.printing.c import C99CodePrinter
 
+    from mechsys.numeric.lambdify import LeanDoprint
+
     functions = {sp.sin: "sin", sp.cos: "cos", sp.tan: "tan", sp.asin: "asin", sp.acos: "acos", sp.atan: "atan",
                  sp.sinh: "sinh", sp.cosh: "cosh", sp.tanh: "tanh", sp.exp: "exp", sp.log: "log", sp.Abs: "fabs"}
     exact = 2.0 ** 53
 
-    class Printer(C99CodePrinter):
+    class Printer(LeanDoprint, C99CodePrinter):
         def _print_Symbol(self, expr):
             return names.get(expr) or super()._print_Symbol(expr)
 
