@@ -558,3 +558,43 @@ def test_a_lone_sum_cofactor_takes_the_whole_sums(monkeypatch):
     assert cleaner._norms(add) == want
     monkeypatch.setattr(rd, "_lone_sum", lambda signature: False)
     assert rd._Cleaner(rd._Work(10**6))._norms(add) != want
+
+
+# ------------------------------------------------------------------- tidy_signs's products built directly
+@pytest.mark.parametrize("name", ["chain", "rolling_disk", "gyrostabilizer", "four_bar"])
+def test_the_products_tidy_signs_builds_are_sympys(name, tmp_path, monkeypatch):
+    """_product builds Mul(coeff, *factors) itself where Mul's flatten would only multiply numbers and sort: on
+    every product a clean-up tidies (both methods), the very Mul sympy builds (srepr, args in order)."""
+    model = mechsys.load(chain_file(8, tmp_path)) if name == "chain" else load_system(name)
+    real = rd._product
+    built = []
+
+    def checked(coeff, factors):
+        got = real(coeff, factors)
+        if got is not None:
+            want = sp.Mul(coeff, *factors)
+            assert sp.srepr(got) == sp.srepr(want) and got.args == want.args, (coeff, factors)
+            built.append(got)
+        return got
+
+    monkeypatch.setattr(rd, "_product", checked)
+    for method in ("kane", "lagrange"):
+        rd.readable(model.equations(method))
+    assert built
+
+
+def test_products_that_flatten_would_change_go_to_sympys_mul():
+    """A float coefficient, one sum left (a number distributes over it), two factors on one base, a numeric
+    power, and the plain cases: _product declines the first four, and tidy_signs gives sympy's Mul every time."""
+    a, b, x, m = sp.symbols("a b x m")
+    declined = [(sp.Integer(2), [sp.Float(0.5), x, a + b]), (sp.Integer(2), [a + b]),
+                (sp.Integer(3), [a + b, (a + b) ** 2, x]), (sp.Integer(2), [sp.sqrt(2), x, m])]
+    for coeff, factors in declined:
+        assert rd._product(coeff, factors) is None
+    built = rd._product(sp.Rational(1, 2), [sp.Integer(-4), m, a + b, sp.cos(x) ** 2])
+    want = sp.Mul(sp.Rational(1, 2), sp.Integer(-4), m, a + b, sp.cos(x) ** 2)
+    assert built is not None and sp.srepr(built) == sp.srepr(want) and built.args == want.args
+    for expr in (m * sp.Float(0.5) * (-2 * a - 2 * b) * x, m * (2 * a + 2 * b) ** 2 * (-a - b),
+                 m * sp.sqrt(2) * (-2 * a - 2 * b), x * (4 * a - 2 * b) / 3):
+        tidy = rd.tidy_signs(expr)
+        assert sp.srepr(tidy) == sp.srepr(sp.Mul(*sp.Mul.make_args(tidy))) and sp.simplify(tidy - expr) == 0

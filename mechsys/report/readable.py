@@ -9,7 +9,7 @@ from typing import Callable, Iterator, TypeVar
 
 import sympy as sp
 from sympy.core.add import _addsort
-from sympy.core.mul import _keep_coeff
+from sympy.core.mul import _keep_coeff, _mulsort
 
 from mechsys.mechanics.model import Equations
 
@@ -241,7 +241,31 @@ def tidy_signs(expr: sp.Expr, memo: dict | None = None) -> sp.Expr:
         changed = True
         coeff *= tidy[0]
         factors.append(tidy[1])
-    return sp.Mul(coeff, *factors) if changed else expr
+    if not changed:
+        return expr
+    quick = _product(coeff, factors) if expr.is_Mul else None
+    return quick if quick is not None else sp.Mul(coeff, *factors)
+
+
+def _product(coeff: sp.Expr, factors: list[sp.Expr]) -> sp.Expr | None:
+    """sp.Mul(coeff, *factors) built directly where Mul's flatten would only multiply the numbers and sort the
+    factors (the factors of a product with some sum factors divided by their content): a rational coefficient,
+    commutative factors that are no numbers, each on its own base, more than one or none a sum. None otherwise
+    (sympy's Mul then: merging powers, distributing a number over a sum, floats...)."""
+    rest = []
+    for f in factors:
+        if f.is_Rational:
+            coeff = coeff * f
+        elif f.is_number or not f.is_commutative:
+            return None
+        else:
+            rest.append(f)
+    if not coeff.is_Rational or coeff == 0 or not rest or len({f.as_base_exp()[0] for f in rest}) < len(rest):
+        return None
+    if len(rest) == 1 and (coeff == 1 or rest[0].is_Add):
+        return None
+    _mulsort(rest)
+    return sp.Mul._from_args(rest if coeff == 1 else [coeff, *rest], True)
 
 
 # ---------------------------------------------------------------------------------------- unit-vector norms
