@@ -23,12 +23,76 @@ __all__ = ["generate_source", "shared_cse", "compile_exprs", "matrix_source", "c
 
 
 class LeanDoprint:
-    """A sympy code printer's doprint that rewrites re(...) of an UnevaluatedExpr only where the expression has an
-    re(...): sympy's does it with a replace over the whole expression for every statement printed, which walks and
-    rebuilds each one (a quarter of the printing time of a long chain's generated package). The same text."""
+    """A sympy code printer with two of sympy's costs cut, the same text: doprint rewrites re(...) of an
+    UnevaluatedExpr only where the expression has an re(...) (sympy's does it with a replace over the whole
+    expression for every statement printed, which walks and rebuilds each one: a quarter of the printing time of
+    a long chain's generated package), and a sum's terms are put in sympy's print order by ordered_terms."""
 
     def _handle_UnevaluatedExpr(self, expr):
         return super()._handle_UnevaluatedExpr(expr) if expr.has(sp.re) else expr
+
+    def _as_ordered_terms(self, expr, order=None):
+        if (order or self.order) is None and expr.is_Add:
+            return ordered_terms(expr)
+        return super()._as_ordered_terms(expr, order=order)
+
+
+_COMPLEX: dict[tuple, complex] = {}  # (type, number) -> complex(number): sympy evaluates each one through evalf
+
+
+def _complex(number: sp.Expr) -> complex:
+    key = (type(number), number)
+    value = _COMPLEX.get(key)
+    if value is None:
+        if len(_COMPLEX) > 10_000:
+            _COMPLEX.clear()
+        value = _COMPLEX[key] = complex(number)
+    return value
+
+
+def ordered_terms(expr: sp.Add) -> list[sp.Expr]:
+    """expr.as_ordered_terms() (sympy's print order of a sum's terms, the default order), with the numbers'
+    complex values remembered: Expr.as_terms converts every term's coefficient by evalf (half of the C and MATLAB
+    targets' printing time on a long chain). The same list (tests/test_numeric.py compares the two)."""
+    from sympy.core.exprtools import decompose_power
+    from sympy.core.sorting import default_sort_key
+
+    terms = sp.Add.make_args(expr)
+    special = sorted(terms, key=lambda x: not isinstance(x, (sp.Number, sp.NumberSymbol)))
+    if len(special) == 2 and isinstance(special[0], (sp.Number, sp.NumberSymbol)) and special[1].is_Mul:
+        return expr.as_ordered_terms()  # as_ordered_terms's special case of a number and a negative product
+    if any(t.is_Order for t in terms):
+        return expr.as_ordered_terms()
+    key, reverse = expr._parse_order(None)
+    gens, parts = set(), []
+    for term in terms:  # Expr.as_terms
+        coeff, rest = term.as_coeff_Mul()
+        coeff = _complex(coeff)
+        cpart, ncpart = {}, []
+        if rest is not sp.S.One:
+            for factor in sp.Mul.make_args(rest):
+                if factor.is_number:
+                    try:
+                        coeff *= _complex(factor)
+                    except (TypeError, ValueError):
+                        pass
+                    else:
+                        continue
+                if factor.is_commutative:
+                    base, exp = decompose_power(factor)
+                    cpart[base] = exp
+                    gens.add(base)
+                else:
+                    ncpart.append(factor)
+        parts.append((term, ((coeff.real, coeff.imag), cpart, tuple(ncpart))))
+    index = {g: i for i, g in enumerate(sorted(gens, key=default_sort_key))}
+    data = []
+    for term, (coeff, cpart, ncpart) in parts:
+        monom = [0] * len(index)
+        for base, exp in cpart.items():
+            monom[index[base]] = exp
+        data.append((term, (coeff, tuple(monom), ncpart)))
+    return [term for term, _ in sorted(data, key=key, reverse=reverse)]
 
 
 class _Printer(LeanDoprint, PythonCodePrinter):
