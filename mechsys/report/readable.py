@@ -249,9 +249,10 @@ def tidy_signs(expr: sp.Expr, memo: dict | None = None) -> sp.Expr:
 
 def _product(coeff: sp.Expr, factors: list[sp.Expr]) -> sp.Expr | None:
     """sp.Mul(coeff, *factors) built directly where Mul's flatten would only multiply the numbers and sort the
-    factors (the factors of a product with some sum factors divided by their content): a rational coefficient,
-    commutative factors that are no numbers, each on its own base, more than one or none a sum. None otherwise
-    (sympy's Mul then: merging powers, distributing a number over a sum, floats...)."""
+    factors (the factors of a product with some sum factors divided by their content): a rational coefficient and
+    commutative factors that are no numbers, each on its own base; two or more of them, or one that is not a sum
+    (a number times one sum is multiplied out). None otherwise (sympy's Mul then: merging powers, distributing a
+    number over a sum, floats...)."""
     rest = []
     for f in factors:
         if f.is_Rational:
