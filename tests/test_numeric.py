@@ -152,7 +152,7 @@ def test_the_direct_python_printer_computes_what_sympys_printer_computes():
 
 
 @pytest.mark.parametrize("target", ["python", "c", "matlab"])
-def test_the_lean_doprint_prints_what_sympys_doprint_prints(target):
+def test_the_lean_doprint_prints_what_sympys_doprint_prints(target, monkeypatch):
     """LeanDoprint skips sympy's re(...) rewrite where an expression has no re: the same text with and without it,
     for an expression with re(UnevaluatedExpr(x)) (rewritten to x) and expressions without re."""
     import sympy as sp
@@ -168,12 +168,8 @@ def test_the_lean_doprint_prints_what_sympys_doprint_prints(target):
     exprs = [sp.re(sp.UnevaluatedExpr(x)) * y + sp.sin(x), sp.sin(x) ** 2 * y + sp.sqrt(y ** 2 + 1),
              sp.Piecewise((x, y > 0), (-y, True))]
     lean = [printer.doprint(e) for e in exprs]
-    plain = type(printer)._handle_UnevaluatedExpr
-    type(printer)._handle_UnevaluatedExpr = CodePrinter._handle_UnevaluatedExpr
-    try:
-        assert [printer.doprint(e) for e in exprs] == lean
-    finally:
-        type(printer)._handle_UnevaluatedExpr = plain
+    monkeypatch.setattr(type(printer), "_handle_UnevaluatedExpr", CodePrinter._handle_UnevaluatedExpr)
+    assert [printer.doprint(e) for e in exprs] == lean
     assert "re(" not in lean[0] and "x" in lean[0]
 
 

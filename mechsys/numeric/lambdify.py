@@ -58,11 +58,9 @@ def ordered_terms(expr: sp.Add) -> list[sp.Expr]:
     from sympy.core.sorting import default_sort_key
 
     terms = sp.Add.make_args(expr)
-    special = sorted(terms, key=lambda x: not isinstance(x, (sp.Number, sp.NumberSymbol)))
-    if len(special) == 2 and isinstance(special[0], (sp.Number, sp.NumberSymbol)) and special[1].is_Mul:
-        return expr.as_ordered_terms()  # as_ordered_terms's special case of a number and a negative product
-    if any(t.is_Order for t in terms):
-        return expr.as_ordered_terms()
+    if len(terms) == 2 and any(isinstance(t, (sp.Number, sp.NumberSymbol)) for t in terms) \
+            and any(t.is_Mul for t in terms) or any(t.is_Order for t in terms):
+        return expr.as_ordered_terms()  # its special case of a number and a negative product; O() terms
     key, reverse = expr._parse_order(None)
     gens, parts = set(), []
     for term in terms:  # Expr.as_terms
