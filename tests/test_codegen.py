@@ -27,7 +27,7 @@ from test_cli_hardening import invoke, one_line  # the command-line helpers: exi
 import mechsys
 from mechsys.codegen import TARGETS, check_target, derive_package, mangle, write_package
 from mechsys.codegen.names import MAX_LENGTH, RESERVED, identifier
-from mechsys.codegen.package import MARKER, Package, write_directory
+from mechsys.codegen.package import MARKER, Package, Program, StepFacts, write_directory
 from mechsys.errors import AnalysisError, InputError
 from mechsys.numeric.lambdify import compile_matrix
 
@@ -572,6 +572,24 @@ def test_every_function_of_the_language_prints_in_every_target(tmp_path):
     assert any(fn.program.outputs and any(e.has(sp.Heaviside) for e in fn.program.outputs + [
         v for _, v in fn.program.assignments]) for fn in pkg.functions.values())
     check_every_target(model, pkg, tmp_path)
+
+
+def test_a_program_knows_which_functions_its_steps_apply():
+    """Program.applies, which lets the printers skip looking through every statement for re(...) and Heaviside:
+    true for a function any step or output applies (however deep), false otherwise; each expression looked at
+    once for all the functions cut from one CSE (StepFacts)."""
+    x, y, c0, c1 = sp.symbols("x y c0 c1")
+    facts = StepFacts()
+    deep = sp.Add(*(sp.Mul(x, sp.Heaviside(y - k)) for k in range(3))) * sp.cos(x) + 1
+    program = Program([(c0, sp.sin(x) * y), (c1, deep)], [c0 + c1], facts)
+    assert program.applies(sp.Heaviside) and program.applies(sp.sin) and program.applies(sp.cos)
+    assert not program.applies(sp.re) and not program.applies(sp.tan)
+    plain = Program([(c0, sp.sin(x) * y)], [c0 * sp.re(y)], facts)
+    assert plain.applies(sp.re) and not plain.applies(sp.Heaviside)
+    assert len(facts.kinds) == 4  # sin(x)*y looked at once for both programs
+    model, pkg = bundled("double_pendulum")
+    fn = pkg.functions["residual_jacobian"]
+    assert not fn.program.applies(sp.Heaviside) and not fn.program.applies(sp.re)
 
 
 # ----------------------------------------------------------------------------------------- example drivers

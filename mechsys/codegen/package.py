@@ -31,14 +31,21 @@ FUNCTIONS = ("mass_matrix", "forcing", "constraint_matrix", "constraint_rhs", "c
 
 
 @dataclass
+class StepFacts:
+    """What is known of the steps of the functions cut from one CSE, each step's found once (not once per function
+    and per question: sympy keeps neither): its free symbols, and the classes of the functions it applies."""
+
+    free: dict = field(default_factory=dict)
+    kinds: dict = field(default_factory=dict)
+
+
+@dataclass
 class Program:
     """Straight-line code: temporaries assigned in order, then the outputs, in terms of inputs and temporaries."""
 
     assignments: list[tuple[sp.Symbol, sp.Expr]]
     outputs: list[sp.Expr]
-    #: expression -> its free symbols, shared by the functions cut from one CSE (each step's set found once, not
-    #: once per function and per question: sympy does not keep them)
-    uses: dict = field(default_factory=dict, compare=False, repr=False)
+    facts: StepFacts = field(default_factory=StepFacts, compare=False, repr=False)
 
     @classmethod
     def of(cls, exprs: Sequence[sp.Expr]) -> "Program":
@@ -47,17 +54,33 @@ class Program:
         return cls(list(replacements), list(reduced))
 
     @classmethod
-    def part(cls, program: "ForwardProgram", outputs: Sequence[sp.Expr], uses: dict | None = None) -> "Program":
+    def part(cls, program: "ForwardProgram", outputs: Sequence[sp.Expr], facts: StepFacts | None = None) -> "Program":
         """``outputs`` (in terms of ``program``'s temporaries) with the temporaries of ``program`` they need: one
-        function of a package from the CSE all of them share (``uses``: the free symbols known so far)."""
+        function of a package from the CSE all of them share (``facts``: what is known of its steps so far)."""
         steps = [(program.symbols[name], value) for name, value in program.values + program.derivatives]
-        return cls(steps, list(outputs), {} if uses is None else uses).pruned()
+        return cls(steps, list(outputs), StepFacts() if facts is None else facts).pruned()
 
     def _free(self, expr: sp.Expr) -> set:
-        found = self.uses.get(expr)
+        found = self.facts.free.get(expr)
         if found is None:
-            found = self.uses[expr] = sp.sympify(expr).free_symbols
+            found = self.facts.free[expr] = sp.sympify(expr).free_symbols
         return found
+
+    def _kinds(self, expr: sp.Expr) -> frozenset:
+        found = self.facts.kinds.get(expr)
+        if found is None:
+            kinds, stack = set(), [sp.sympify(expr)]
+            while stack:  # iterative: a long chain's outputs are deep sums of products
+                node = stack.pop()
+                if isinstance(node, sp.Function):
+                    kinds.add(type(node))
+                stack.extend(node.args)
+            found = self.facts.kinds[expr] = frozenset(kinds)
+        return found
+
+    def applies(self, kind: type) -> bool:
+        """Whether a step or an output applies the function ``kind`` (such as sp.re or sp.Heaviside)."""
+        return any(kind in self._kinds(e) for e in [v for _, v in self.assignments] + self.outputs)
 
     def pruned(self) -> "Program":
         """Without the temporaries no output needs."""
@@ -67,7 +90,7 @@ class Program:
             if sym in needed:
                 kept.append((sym, value))
                 needed |= self._free(value)
-        return Program(kept[::-1], self.outputs, self.uses)
+        return Program(kept[::-1], self.outputs, self.facts)
 
     def inputs(self) -> set:
         """The symbols the program reads (not its own temporaries)."""
@@ -177,19 +200,22 @@ def function_body(pkg: Package, fn: Function, style: Style) -> tuple[list[str], 
     for k, (sym, _) in enumerate(fn.program.assignments):
         names[sym] = f"cse{k}"
     printer = style.printer(names)
-    lines += [style.assign(names[sym], printer.doprint(_without_steps(value))) for sym, value in
+    printer.no_re = not fn.program.applies(sp.re)  # LeanDoprint: no statement to look through for re(...)
+    steps = fn.program.applies(sp.Heaviside)
+    lines += [style.assign(names[sym], printer.doprint(_without_steps(value, steps))) for sym, value in
               fn.program.assignments]
-    return lines, [printer.doprint(_without_steps(sp.sympify(e))) for e in fn.program.outputs]
+    return lines, [printer.doprint(_without_steps(sp.sympify(e), steps)) for e in fn.program.outputs]
 
 
-def _without_steps(expr: sp.Expr) -> sp.Expr:
+def _without_steps(expr: sp.Expr, steps: bool = True) -> sp.Expr:
     """Heaviside(x, h0) (the derivative of min and max) written with sign(x), which every target prints: sympy's
-    printers turn it into a Piecewise whose conditions may hold booleans that C cannot print."""
+    printers turn it into a Piecewise whose conditions may hold booleans that C cannot print. ``steps`` False: the
+    program has none (nothing to look for)."""
     def step(x: sp.Expr, h0: sp.Expr = sp.S.Half) -> sp.Expr:
         s = sp.sign(x)
         return (1 + s) / 2 if h0 == sp.S.Half else s ** 2 * (1 + s) / 2 + h0 * (1 - s ** 2)
 
-    return expr.replace(sp.Heaviside, step) if expr.has(sp.Heaviside) else expr
+    return expr.replace(sp.Heaviside, step) if steps and expr.has(sp.Heaviside) else expr
 
 
 def plain(text: str) -> str:
@@ -297,17 +323,17 @@ def derive_package(model: "MechanicalModel", method: str = "lagrange") -> Packag
         parts.append(shared.outputs[start:start + len(block)])
         entries.append(as_named[start:start + len(block)])
         start += len(block)
-    uses: dict = {}  # the free symbols of the CSE's steps, for every function cut from it
-    add("mass_matrix", STATE_ARGS, (n, n), Program.part(shared, parts[0], uses), "mass matrix M")
-    add("forcing", STATE_ARGS, (n,), Program.part(shared, parts[1], uses), "forcing f (M q'' = f + A^T lam)")
+    facts = StepFacts()  # what is known of the CSE's steps, for every function cut from it
+    add("mass_matrix", STATE_ARGS, (n, n), Program.part(shared, parts[0], facts), "mass matrix M")
+    add("forcing", STATE_ARGS, (n,), Program.part(shared, parts[1], facts), "forcing f (M q'' = f + A^T lam)")
     a = sp.Matrix(model.a)
     residual = list(product(sp.Matrix(n, n, entries[0]), a) - sp.Matrix(entries[1]))
     if m:
         holonomic = model.holonomic_constraints
         A = sp.Matrix(m, n, entries[2])
-        add("constraint_matrix", STATE_ARGS, (m, n), Program.part(shared, parts[2], uses),
+        add("constraint_matrix", STATE_ARGS, (m, n), Program.part(shared, parts[2], facts),
             "constraint matrix A (A q'' = b)")
-        add("constraint_rhs", STATE_ARGS, (m,), Program.part(shared, parts[3], uses),
+        add("constraint_rhs", STATE_ARGS, (m,), Program.part(shared, parts[3], facts),
             "constraint right-hand side b")
         add("constraint_velocity", STATE_ARGS, (m,), Program.of(list(model.constraint_velocity)),
             "velocity-level constraints A q' + a_t (zero on a consistent motion)")
@@ -320,7 +346,7 @@ def derive_package(model: "MechanicalModel", method: str = "lagrange") -> Packag
     add("potential_energy", STATE_ARGS, (), Program.of([eq.V]), "potential energy V")
     named.outputs = residual
     jac = differentiate_program(named, wrt)
-    add("residual_jacobian", ("t", "q", "u", "a", "lam", "p"), (n + m, 2 * n), Program.part(jac, jac.jacobian, uses),
+    add("residual_jacobian", ("t", "q", "u", "a", "lam", "p"), (n + m, 2 * n), Program.part(jac, jac.jacobian, facts),
         "Jacobian d[M q'' - f - A^T lam; A q'' - b]/d[q, q'] at given q'' and lam (exact, symbolic)")
     return pkg
 

@@ -26,10 +26,13 @@ class LeanDoprint:
     """A sympy code printer with two of sympy's costs cut, the same text: doprint rewrites re(...) of an
     UnevaluatedExpr only where the expression has an re(...) (sympy's does it with a replace over the whole
     expression for every statement printed, which walks and rebuilds each one: a quarter of the printing time of
-    a long chain's generated package), and a sum's terms are put in sympy's print order by ordered_terms."""
+    a long chain's generated package), and a sum's terms are put in sympy's print order by ordered_terms.
+    ``no_re``: the caller knows that nothing it prints has an re(...) (codegen's Program.applies)."""
+
+    no_re = False
 
     def _handle_UnevaluatedExpr(self, expr):
-        return super()._handle_UnevaluatedExpr(expr) if expr.has(sp.re) else expr
+        return super()._handle_UnevaluatedExpr(expr) if not self.no_re and expr.has(sp.re) else expr
 
     def _as_ordered_terms(self, expr, order=None):
         if (order or self.order) is None and expr.is_Add:
