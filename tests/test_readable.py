@@ -379,7 +379,7 @@ def test_the_sum_and_difference_formulas():
     assert angle_leftovers(a * cc - a * ss) and angle_leftovers(a * sc + a * cs)
 
 
-def test_the_double_pendulums_printed_mass_matrix_is_the_textbook_one():
+def test_the_double_pendulums_printed_equations_are_the_textbook_ones():
     """Rods of length l1, l2 (centres at the middle), theta2 relative to rod 1. By hand: the centre of rod 2 moves
     with l1 theta1' e1 + l2/2 (theta1' + theta2') e2, e1 . e2 = cos(theta2); with the rods' central inertias
     m l**2/12, M11 = m1 l1**2/3 + m2 (l1**2 + l2**2/4 + l1 l2 cos(theta2)) + m2 l2**2/12,
@@ -393,14 +393,45 @@ def test_the_double_pendulums_printed_mass_matrix_is_the_textbook_one():
     closed = sp.Matrix([[m1 * l1 ** 2 / 3 + m2 * (l1 ** 2 + l2 ** 2 / 4 + l1 * l2 * c2) + m2 * l2 ** 2 / 12,
                          m2 * (l2 ** 2 / 4 + l1 * l2 * c2 / 2) + m2 * l2 ** 2 / 12],
                         [m2 * (l2 ** 2 / 4 + l1 * l2 * c2 / 2) + m2 * l2 ** 2 / 12, m2 * l2 ** 2 / 3]])
+    w1, w2 = model.u
+    h, g = m2 * l1 * l2 * sp.sin(th2) / 2, names["g"]
+    forcing = sp.Matrix([h * (2 * w1 * w2 + w2 ** 2) - g * m2 * (l2 * sp.sin(th1 + th2) / 2 + l1 * sp.sin(th1))
+                         - g * m1 * l1 * sp.sin(th1) / 2,
+                         -h * w1 ** 2 - g * m2 * l2 * sp.sin(th1 + th2) / 2])
     for method in ("lagrange", "kane"):
         raw = model.equations(method)
-        clean = rd.readable(raw).equations.M
+        cleaned = rd.readable(raw).equations
+        clean = cleaned.M
         assert (clean - closed).expand() == sp.zeros(2, 2), method  # the same polynomial in cos(theta2)
         assert th1 in raw.M.free_symbols and th1 not in clean.free_symbols, method
         assert not any(angle_leftovers(e) for e in clean), method
+        assert (cleaned.f - forcing).expand() == sp.zeros(2, 1), method  # sin(theta2), the Coriolis terms
+        assert (raw.f - forcing).expand() != sp.zeros(2, 1), method
     text = derive(SYSTEMS_DIR / "double_pendulum.yaml")
     assert "(m1*l1**2/3 + m2*(l2**2 + 4*l1**2 + 4*l1*l2*cos(theta2))/4 + m2*l2**2/12)*der(der(theta1))" in text
+    assert "der(der(theta2)) = -g*l2*m2*sin(theta1 + theta2)/2 + " in text
+
+
+def test_products_are_multiplied_out_for_the_formulas_alone_only_in_equations_printed_inline(monkeypatch):
+    """A product of sums whose multiplied-out form only the sum and difference formulas shorten (no sin**2/cos**2
+    pair) is multiplied out when the equations print inline (below printing.AUTO_NODES), not in equations that
+    print with named subexpressions, where the sums' trees do not measure the text."""
+    x, y, a, b, v, w = sp.symbols("x y a b v w")
+    product_ = (a * sp.sin(x) + b * sp.sin(y)) * (a * v * sp.cos(x) + b * w * sp.cos(y))
+    crossed = product_ - (a * sp.cos(x) + b * sp.cos(y)) * (a * v * sp.sin(x) + b * w * sp.sin(y))
+    small = rd._Cleaner(rd._Work(10**6), angles=True)._norms(crossed)
+    assert small == a * b * w * sp.sin(x - y) - a * b * v * sp.sin(x - y)  # by hand: ab (w - v) sin(x - y)
+    assert rd.clean_expression(crossed) == small and rd._Cleaner(rd._Work(10**6))._norms(crossed) == crossed
+    eq = load_system("four_bar").equations("kane")
+    entries_ = [(n, i) for n, i in rd._entries(eq) if rd._get(eq, n, i).args]
+    inline = rd.readable(eq).equations.f
+    assert rd._inline(eq, entries_)
+    monkeypatch.setattr("mechsys.report.printing.AUTO_NODES", 10)
+    assert not rd._inline(eq, entries_)
+    named = rd.readable(eq).equations.f
+    assert named != inline and sum(map(rd._Cleaner(rd._Work(10**6)).size, named)) > \
+        sum(map(rd._Cleaner(rd._Work(10**6)).size, inline))
+    assert_exact(list(named), list(inline))
 
 
 ARM = """\
@@ -430,12 +461,13 @@ links:
 """
 
 
-def test_a_user_arms_printed_mass_matrix_is_the_closed_form(tmp_path):
+def test_a_user_arms_printed_equations_are_the_closed_forms(tmp_path):
     """Point masses m_k at the tips of links L_k joined by relative angles. By hand: with the absolute angles
     th_j = q1 + ... + qj, the mass k sits at sum_(j<=k) L_j e(th_j), so its velocity's coefficient of qi' is
     sum_(i<=j<=k) L_j e'(th_j) and M_ii' = sum_k m_k sum_(j>=i, j'>=i', j,j'<=k) L_j L_j' cos(th_j - th_j'):
-    cosines of relative angles only. The printed M is that polynomial (term for term after expand), for both
-    methods."""
+    cosines of relative angles only; with T = u^T M u / 2, f = dT/dq - (dM/dt) u (sympy on this M, nothing of
+    mechsys). The printed M and f are those polynomials (term for term after expand), for both methods: a small
+    model's products of sums are multiplied out where the sum and difference formulas make them smaller."""
     path = tmp_path / "arm3.yaml"
     path.write_text(ARM)
     model = mechsys.load(path)
@@ -447,12 +479,18 @@ def test_a_user_arms_printed_mass_matrix_is_the_closed_form(tmp_path):
     for i, i2, k in itertools.product(range(3), range(3), range(3)):
         closed[i, i2] += m[k] * sum(L[j] * L[j2] * sp.cos(th[j] - th[j2])
                                     for j in range(i, k + 1) for j2 in range(i2, k + 1))
+    u = sp.Matrix(model.u)
+    kinetic = (u.T * closed * u)[0] / 2
+    rates = closed.applyfunc(lambda e: sum(sp.diff(e, q) * w for q, w in zip(model.q, u)))
+    forcing = sp.Matrix([sp.diff(kinetic, q) for q in model.q]) - rates * u
     for method in ("lagrange", "kane"):
         raw = model.equations(method)
-        clean = rd.readable(raw).equations.M
+        cleaned = rd.readable(raw).equations
+        clean = cleaned.M
         assert (clean - closed).expand() == sp.zeros(3, 3), method
         assert model.q[0] not in clean.free_symbols and not any(angle_leftovers(e) for e in clean), method
-        assert_exact(list(raw.M), list(clean))
+        assert (cleaned.f - forcing).expand() == sp.zeros(3, 1), method
+        assert_exact(list(raw.M) + list(raw.f), list(clean) + list(cleaned.f))
 
 
 @pytest.mark.parametrize("method", ["lagrange", "kane"])

@@ -183,6 +183,7 @@ _ANGLE_RULES = {((sp.cos, sp.cos), (sp.sin, sp.sin), 1): (sp.cos, -1),
                 ((sp.sin, sp.cos), (sp.cos, sp.sin), 1): (sp.sin, 1),
                 ((sp.sin, sp.cos), (sp.cos, sp.sin), -1): (sp.sin, -1)}
 _ANGLE_PARTNER = {(sp.cos, sp.cos): (sp.sin, sp.sin), (sp.sin, sp.cos): (sp.cos, sp.sin)}
+_ANGLE_EITHER = {**_ANGLE_PARTNER, **{b: a for a, b in _ANGLE_PARTNER.items()}}  # each kind of pair's partner
 
 
 def _angle(rule: tuple, x: sp.Expr, y: sp.Expr) -> sp.Expr | None:
@@ -390,13 +391,18 @@ def _times(a: Monomial, b: Monomial) -> Monomial:
     return a[0] * b[0], powers
 
 
-def _has_square_pair(monomials: list[Monomial]) -> bool:
-    """Whether two of the (collected) monomials are c*R*sin(x)**2 and c*R*cos(x)**2 (the sum and difference
-    formulas alone are not looked for: they only shorten what a square pair's trial multiplies out)."""
+def _collected(monomials: list[Monomial]) -> dict[frozenset, sp.Expr]:
+    """The monomials with like ones added: {the set of (base, exponent): coefficient}."""
     collected: dict[frozenset, sp.Expr] = {}
     for coeff, powers in monomials:
         key = frozenset((b, e) for b, e in powers.items() if e != 0)
         collected[key] = collected.get(key, 0) + coeff
+    return collected
+
+
+def _has_square_pair(monomials: list[Monomial]) -> bool:
+    """Whether two of the (collected) monomials are c*R*sin(x)**2 and c*R*cos(x)**2."""
+    collected = _collected(monomials)
     seen: dict[tuple, set] = {}
     for key, coeff in collected.items():
         if coeff == 0:
@@ -411,6 +417,28 @@ def _has_square_pair(monomials: list[Monomial]) -> bool:
     return False
 
 
+def _has_angle_pair(monomials: list[Monomial]) -> bool:
+    """Whether two of the (collected) monomials are a pair of the sum and difference formulas: c*R*cos(x)*cos(y)
+    and +-c*R*sin(x)*sin(y), or c*R*sin(x)*cos(y) and +-c*R*cos(x)*sin(y)."""
+    slots: dict[tuple, set] = {}
+    for key, coeff in _collected(monomials).items():
+        if coeff == 0:
+            continue
+        trig = [(base, exp) for base, exp in key if isinstance(base, _TRIG) and exp.is_Integer and exp >= 1]
+        for a, b in combinations(trig, 2):
+            if a[0].args[0] == b[0].args[0]:
+                continue
+            rest = key - {a, b} | {(f, e - 1) for f, e in (a, b) if e > 1}
+            if a[0].args[0].compare(b[0].args[0]) > 0:
+                a, b = b, a
+            funcs = (a[0].func, b[0].func)
+            slot = slots.setdefault((a[0].args[0], b[0].args[0], rest), set())
+            if (_ANGLE_EITHER[funcs], coeff) in slot or (_ANGLE_EITHER[funcs], -coeff) in slot:
+                return True
+            slot.add((funcs, coeff))
+    return False
+
+
 @dataclass
 class _Work:
     """The budget of one command's clean-up (node visits), shared by its passes."""
@@ -422,10 +450,11 @@ class _Work:
 class _Cleaner:
     """One clean-up pass over many expressions, sharing the work on common subexpressions, against a budget."""
 
-    def __init__(self, work: "_Work", norms: bool = True, settled: bool = False) -> None:
+    def __init__(self, work: "_Work", norms: bool = True, settled: bool = False, angles: bool = False) -> None:
         self.work = work
         self.norms = norms
         self.settled = settled  # the input already went through the identities and signs: redo them on change
+        self.angles = angles  # also try the norms where only the sum and difference formulas would apply
         self.memo: dict[sp.Basic, sp.Basic] = {}
         self.sizes: dict[sp.Basic, int] = {}
         self.products: dict[sp.Expr, sp.Expr] = {}
@@ -506,7 +535,8 @@ class _Cleaner:
         wanted = set(candidates)  # looked up by hash: a list compares unequal terms through their trees
         if not candidates or not _may_pair(add.args, wanted):
             return add
-        if not _has_square_pair([m for t in add.args for m in self._monomials(t, t in wanted)]):
+        monomials = [m for t in add.args for m in self._monomials(t, t in wanted)]
+        if not _has_square_pair(monomials) and not (self.angles and _has_angle_pair(monomials)):
             return add
         expanded = {t: self._products(t) for t in candidates}
         trials = _Classes.of(add, expanded, self) or _Whole(add, expanded, self)
@@ -659,13 +689,30 @@ def readable(eq: Equations, budget: int | None = None) -> Cleanup:
     cheap, left = _clean_entries(eq, entries, _Cleaner(work, norms=False))
     if left:
         return Cleanup(cheap, len(entries), left, 0, work.budget, work.spent)
-    full, partly = _clean_entries(cheap, entries, _Cleaner(work, settled=True))
+    full, partly = _clean_entries(cheap, entries, _Cleaner(work, settled=True, angles=_inline(cheap, entries)))
     return Cleanup(full, len(entries), 0, partly, work.budget, work.spent)
 
 
+def _inline(eq: Equations, entries: list[tuple[str, tuple]]) -> bool:
+    """Whether the equations are small enough to print inline (report/printing.AUTO_NODES, the size at which
+    `derive` starts to name shared subexpressions). Only then are the norms tried where only the sum and difference
+    formulas would apply: the trials' measure, the size of each sum's tree, is then the printed size; in named
+    output, multiplying out a factor printed once by name makes the text longer (the bicycle's: 37 kB -> 43 kB)."""
+    from mechsys.report.printing import AUTO_NODES
+
+    sizes: dict = {}
+    total = 0
+    for name, index in entries:
+        total += _fold(_get(eq, name, index), lambda node, args: 1 + sum(args), sizes, _no_tick)
+        if total > AUTO_NODES:
+            return False
+    return True
+
+
 def clean_expression(expr: sp.Expr, budget: int | None = None) -> sp.Expr:
-    """One expression cleaned up as `readable` does, in one pass (OutOfTime when the budget runs out)."""
-    return _Cleaner(_Work(BUDGET_VISITS if budget is None else budget)).clean(sp.sympify(expr))
+    """One expression cleaned up as `readable` does a small model's, in one pass (OutOfTime when the budget runs
+    out)."""
+    return _Cleaner(_Work(BUDGET_VISITS if budget is None else budget), angles=True).clean(sp.sympify(expr))
 
 
 def stored_readable(model, eq: Equations, budget: int | None = None) -> Cleanup:
