@@ -37,21 +37,25 @@ def entries(eq: Equations) -> list[sp.Expr]:
 
 
 # ------------------------------------------------------------------------------ an independent leftover check
-def pythagorean_leftovers(expr: sp.Expr) -> list[tuple[sp.Expr, sp.Expr]]:
-    """Pairs of terms of one sum that read c*R*sin(x)**n and c*R*sin(x)**(n-2)*cos(x)**2 (the same cofactor
-    c*R): found with sympy's own arithmetic on the expression tree, nothing parsed from text."""
+def sum_pairs(expr: sp.Expr, partners) -> list[tuple[sp.Expr, sp.Expr]]:
+    """Pairs (term, partner) of terms of one sum of ``expr``, the partner one of ``partners(term)``: found with
+    sympy's own arithmetic on the expression tree, nothing parsed from text."""
     found = []
     for node in sp.preorder_traversal(expr):
-        if not node.is_Add:
-            continue
-        terms = set(node.args)
-        for term in node.args:
-            for f in sp.Mul.make_args(term):
-                if f.is_Pow and isinstance(f.base, sp.sin) and f.exp.is_Integer and f.exp >= 2:
-                    partner = term / f.base ** 2 * sp.cos(f.base.args[0]) ** 2
-                    if partner in terms:
-                        found.append((term, partner))
+        if node.is_Add:
+            terms = set(node.args)
+            found += [(term, p) for term in node.args for p in partners(term) if p in terms]
     return found
+
+
+def pythagorean_leftovers(expr: sp.Expr) -> list[tuple[sp.Expr, sp.Expr]]:
+    """Pairs of terms of one sum that read c*R*sin(x)**n and c*R*sin(x)**(n-2)*cos(x)**2 (the same cofactor
+    c*R)."""
+    def partners(term: sp.Expr) -> list[sp.Expr]:
+        return [term / f.base ** 2 * sp.cos(f.base.args[0]) ** 2 for f in sp.Mul.make_args(term)
+                if f.is_Pow and isinstance(f.base, sp.sin) and f.exp.is_Integer and f.exp >= 2]
+
+    return sum_pairs(expr, partners)
 
 
 def test_the_leftover_check_finds_what_the_derivation_leaves():
@@ -332,21 +336,18 @@ def test_printed_mass_matrix_of_a_user_model_is_the_closed_form(name, tmp_path: 
 # ------------------------------------------------------------------------ the sum and difference formulas
 def angle_leftovers(expr: sp.Expr) -> list[tuple[sp.Expr, sp.Expr]]:
     """Pairs of terms of one sum that read c*R*cos(x)*cos(y) and +-c*R*sin(x)*sin(y), or c*R*sin(x)*cos(y) and
-    +-c*R*cos(x)*sin(y) (x != y): found with sympy's own arithmetic on the tree, as pythagorean_leftovers."""
-    found = []
-    for node in sp.preorder_traversal(expr):
-        if not node.is_Add:
-            continue
-        terms = set(node.args)
-        for term in node.args:
-            bases = [f for f in sp.Mul.make_args(term) if isinstance(f, (sp.sin, sp.cos))]
-            for a, b in itertools.permutations(bases, 2):
-                if a.args[0] == b.args[0] or not isinstance(a, sp.cos):
-                    continue
-                partner = term / (a * b) * sp.sin(a.args[0]) * (sp.cos if isinstance(b, sp.sin) else sp.sin)(b.args[0])
-                if partner in terms or -partner in terms:
-                    found.append((term, partner))
-    return found
+    +-c*R*cos(x)*sin(y) (x != y)."""
+    def partners(term: sp.Expr) -> list[sp.Expr]:
+        bases = [f for f in sp.Mul.make_args(term) if isinstance(f, (sp.sin, sp.cos))]
+        out = []
+        for a, b in itertools.permutations(bases, 2):
+            if a.args[0] != b.args[0] and isinstance(a, sp.cos):
+                other = sp.cos if isinstance(b, sp.sin) else sp.sin
+                partner = term / (a * b) * sp.sin(a.args[0]) * other(b.args[0])
+                out += [partner, -partner]
+        return out
+
+    return sum_pairs(expr, partners)
 
 
 def test_the_sum_and_difference_formulas():

@@ -700,10 +700,10 @@ def _inline(eq: Equations, entries: list[tuple[str, tuple]]) -> bool:
     output, multiplying out a factor printed once by name makes the text longer (the bicycle's: 37 kB -> 43 kB)."""
     from mechsys.report.printing import AUTO_NODES
 
-    sizes: dict = {}
+    sizer = _Cleaner(_Work(0), norms=False)
     total = 0
     for name, index in entries:
-        total += _fold(_get(eq, name, index), lambda node, args: 1 + sum(args), sizes, _no_tick)
+        total += sizer.size(_get(eq, name, index))
         if total > AUTO_NODES:
             return False
     return True
