@@ -154,23 +154,29 @@ def _pair_complements(terms: list[sp.Expr]) -> list[sp.Expr] | None:
     return [t for k, t in enumerate(terms) if k not in used] + new if new else None
 
 
-def _trig_power(factor: sp.Expr) -> tuple[type, sp.Expr, sp.Expr] | None:
-    """(sin or cos, argument, the factor divided by one power of it) for sin(x)**n or cos(x)**n, integer n >= 1."""
+def _trig_power(factor: sp.Expr) -> tuple[type, sp.Expr] | None:
+    """(sin or cos, argument) for sin(x)**n or cos(x)**n, integer n >= 1."""
     if isinstance(factor, _TRIG):
-        return factor.func, factor.args[0], sp.S.One
+        return factor.func, factor.args[0]
     if factor.is_Pow and isinstance(factor.base, _TRIG) and factor.exp.is_Integer and factor.exp >= 1:
-        return factor.base.func, factor.base.args[0], factor.base ** (factor.exp - 1)
+        return factor.base.func, factor.base.args[0]
     return None
+
+
+def _one_power_less(factor: sp.Expr) -> tuple[sp.Expr, ...]:
+    """sin(x)**n / sin(x) (likewise cos) as the factors it leaves: none for n = 1."""
+    return (factor.base ** (factor.exp - 1),) if factor.is_Pow else ()
 
 
 def _angle_pairs(factors: tuple[sp.Expr, ...], trig: list[tuple[int, tuple]]) -> Iterator[tuple]:
     """For each two of the sin/cos factors ``trig`` ((index, _trig_power) of ``factors``) of different arguments:
     ((function of x, function of y), x, y, the other factors once one power of each is taken out, as a set), x and
     y in sympy's canonical order."""
-    for (i, (fi, xi, ri)), (j, (fj, xj, rj)) in combinations(trig, 2):
+    for (i, (fi, xi)), (j, (fj, xj)) in combinations(trig, 2):
         if xi == xj:
             continue
-        others = factors[:i] + factors[i + 1:j] + factors[j + 1:] + tuple(r for r in (ri, rj) if r != 1)
+        others = (factors[:i] + factors[i + 1:j] + factors[j + 1:] + _one_power_less(factors[i])
+                  + _one_power_less(factors[j]))
         if xi.compare(xj) > 0:
             fi, xi, fj, xj = fj, xj, fi, xi
         yield (fi, fj), xi, xj, frozenset(others)
@@ -205,7 +211,7 @@ def _pair_angles(terms: list[sp.Expr]) -> list[sp.Expr] | None:
         trig = [(k, t) for k, t in enumerate(map(_trig_power, factors)) if t is not None]
         if len(trig) >= 2:
             candidates.append((i, coeff, factors, trig))
-            for _, (func, arg, _) in trig:
+            for _, (func, arg) in trig:
                 (sins if func is sp.sin else coss).add(arg)
     if len(candidates) < 2 or sins.isdisjoint(coss):  # every rule needs sin(x) in one term and cos(x) in another
         return None
