@@ -168,8 +168,13 @@ def _one_power_less(factor: sp.Expr) -> tuple[sp.Expr, ...]:
     return (factor.base ** (factor.exp - 1),) if factor.is_Pow else ()
 
 
+def _trig_factors(factors: tuple[sp.Expr, ...]) -> list[tuple[int, tuple]]:
+    """(index, _trig_power) of each sin/cos factor."""
+    return [(k, t) for k, t in enumerate(map(_trig_power, factors)) if t is not None]
+
+
 def _angle_pairs(factors: tuple[sp.Expr, ...], trig: list[tuple[int, tuple]]) -> Iterator[tuple]:
-    """For each two of the sin/cos factors ``trig`` ((index, _trig_power) of ``factors``) of different arguments:
+    """For each two of the sin/cos factors ``trig`` (_trig_factors of ``factors``) of different arguments:
     ((function of x, function of y), x, y, the other factors once one power of each is taken out, as a set), x and
     y in sympy's canonical order."""
     for (i, (fi, xi)), (j, (fj, xj)) in combinations(trig, 2):
@@ -208,7 +213,7 @@ def _pair_angles(terms: list[sp.Expr]) -> list[sp.Expr] | None:
     coss: set = set()
     for i, term in enumerate(terms):
         coeff, factors = _factors(term)
-        trig = [(k, t) for k, t in enumerate(map(_trig_power, factors)) if t is not None]
+        trig = _trig_factors(factors)
         if len(trig) >= 2:
             candidates.append((i, coeff, factors, trig))
             for _, (func, arg) in trig:
@@ -425,20 +430,14 @@ def _has_square_pair(monomials: list[Monomial]) -> bool:
 
 def _has_angle_pair(monomials: list[Monomial]) -> bool:
     """Whether two of the (collected) monomials are a pair of the sum and difference formulas: c*R*cos(x)*cos(y)
-    and +-c*R*sin(x)*sin(y), or c*R*sin(x)*cos(y) and +-c*R*cos(x)*sin(y)."""
+    and +-c*R*sin(x)*sin(y), or c*R*sin(x)*cos(y) and +-c*R*cos(x)*sin(y) (the pairs _pair_angles takes)."""
     slots: dict[tuple, set] = {}
     for key, coeff in _collected(monomials).items():
         if coeff == 0:
             continue
-        trig = [(base, exp) for base, exp in key if isinstance(base, _TRIG) and exp.is_Integer and exp >= 1]
-        for a, b in combinations(trig, 2):
-            if a[0].args[0] == b[0].args[0]:
-                continue
-            rest = key - {a, b} | {(f, e - 1) for f, e in (a, b) if e > 1}
-            if a[0].args[0].compare(b[0].args[0]) > 0:
-                a, b = b, a
-            funcs = (a[0].func, b[0].func)
-            slot = slots.setdefault((a[0].args[0], b[0].args[0], rest), set())
+        factors = tuple(base ** exp for base, exp in key)
+        for funcs, x, y, others in _angle_pairs(factors, _trig_factors(factors)):
+            slot = slots.setdefault((x, y, others), set())
             if (_ANGLE_EITHER[funcs], coeff) in slot or (_ANGLE_EITHER[funcs], -coeff) in slot:
                 return True
             slot.add((funcs, coeff))
