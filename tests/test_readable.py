@@ -508,7 +508,7 @@ def test_no_angle_leftovers_in_the_printed_mass_matrices(name, method, monkeypat
 
 
 # ------------------------------------------------------------------------ the clean-up kept in the cache
-@pytest.mark.parametrize("name", ["gyrostabilizer", "rolling_disk", "slider_crank"])
+@pytest.mark.parametrize("name", ["gyrostabilizer", "rolling_disk", "slider_crank", "double_pendulum"])
 def test_a_stored_clean_up_prints_what_a_fresh_one_prints_without_cleaning_again(name, tmp_path, monkeypatch):
     from mechsys.report.derive import render
 
