@@ -13,7 +13,7 @@ import pytest
 
 import mechsys
 from mechsys.analysis.equilibrium import bifurcation as bf
-from mechsys.analysis.equilibrium.continuation import _Tracer
+from mechsys.analysis.equilibrium.continuation import ContinuationOptions, _Tracer
 from mechsys.analysis.equilibrium.equilibria import is_isolated, solve_equilibria
 from mechsys.analysis.equilibrium import nonholonomic as nh
 from mechsys.analysis.equilibrium.nonholonomic import NonholonomicProblem
@@ -44,8 +44,9 @@ def _tracers(path: Path, name: str, at: float):
     s = np.where(np.arange(n) >= problem.nq + len(problem.rate_unknowns), bf.AUX_ARC_WEIGHT, 1.0)
     factory = system.compiled([(z0 / system.D, at)])
     assert factory is not None
-    python = _Tracer(F, Fx, Fp, None, n, s, 1e-10, 1e-8, np.ones(n))
-    compiled = _Tracer(F, Fx, Fp, None, n, s, 1e-10, 1e-8, np.ones(n), compiled=factory)
+    options = ContinuationOptions(tol=1e-10, tol_re=1e-8, x_scale=s, tol_scale=np.ones(n))
+    python = _Tracer(F, Fx, Fp, None, n, options)
+    compiled = _Tracer(F, Fx, Fp, None, n, options, compiled=factory)
     return python, compiled, python.z_of(z0 / system.D, at)
 
 

@@ -4,8 +4,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mechsys.analysis.equilibrium.continuation import (Bifurcation, Branch, BranchPoint, Undefined, continue_branch,
-                                           sweep_parameter)
+from mechsys.analysis.equilibrium.continuation import (Bifurcation, Branch, BranchPoint, ContinuationOptions,
+                                                       Undefined, continue_branch, sweep_parameter)
 
 
 # -- toy problems ------------------------------------------------------------------------------------------
@@ -260,6 +260,20 @@ def test_start_not_converging_raises():
         continue_branch(F, Fx, Fp, np.array([1.0]), 0.0, -1.0, 1.0, eig)
     with pytest.raises(ValueError, match="outside"):
         continue_branch(*fold_problem()[:3], np.array([1.0]), -1.0, 0.0, 1.0, fold_problem()[3])
+
+
+def test_continuation_options_are_checked_by_name_and_value():
+    """The options object (ContinuationOptions) refuses an unknown name and steps out of order, for both entry
+    points, before any tracing."""
+    F, Fx, Fp, eig = fold_problem()
+    for bad in ({"ds_min": 0.0}, {"ds_min": 0.6, "ds_max": 0.5}, {"ds": -0.1}):
+        with pytest.raises(ValueError, match="ds_min <= ds_max"):
+            continue_branch(F, Fx, Fp, np.array([1.0]), -1.0, -2.0, 0.5, eig, **bad)
+        with pytest.raises(ValueError, match="ds_min <= ds_max"):
+            sweep_parameter(F, Fx, Fp, [(np.array([1.0]), -1.0)], -2.0, 0.5, eig, **bad)
+    with pytest.raises(TypeError, match="step"):
+        sweep_parameter(F, Fx, Fp, [(np.array([1.0]), -1.0)], -2.0, 0.5, eig, step=0.1)
+    assert ContinuationOptions().ds == 0.05 and ContinuationOptions(ds=0.02).max_steps == 2000
 
 
 def test_a_branch_cut_by_the_step_limit_says_so():

@@ -24,6 +24,26 @@ _LOCATE_XTOL = 1e-13         # arclength tolerance when locating events (gives p
 _DP_ZERO = 1e-10             # |tangent_p| below this counts as "no p-direction" (start at a fold)
 
 
+@dataclass(frozen=True, eq=False)
+class ContinuationOptions:
+    """How a branch is traced (continue_branch tells what each does): the arclength step (first, smallest,
+    largest), the step limit, Newton's tolerance, the half-width of the imaginary axis for eigenvalues, and the
+    scales of the unknowns in the arclength (``x_scale``) and in Newton's convergence test (``tol_scale``)."""
+
+    ds: float = 0.05
+    ds_min: float = 1e-6
+    ds_max: float = 0.5
+    max_steps: int = 2000
+    tol: float = 1e-10
+    tol_re: float = 1e-9
+    x_scale: float | np.ndarray | None = None
+    tol_scale: float | np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        if not (0.0 < self.ds_min <= self.ds_max and self.ds > 0.0):
+            raise ValueError("continuation: need 0 < ds_min <= ds_max and ds > 0")
+
+
 @dataclass
 class BranchPoint:
     p: float
@@ -92,15 +112,16 @@ class _Tracer:
     is judged in x / tol_scale (default: x_scale), so unknowns weighted down in the arclength (a large x_scale)
     are still solved to the full tolerance."""
 
-    def __init__(self, F: ArrayFn, Fx: ArrayFn, Fp: ArrayFn, eig: ArrayFn, n: int, x_scale, tol: float,
-                 tol_re: float, tol_scale=None, compiled: Compiled | None = None) -> None:
+    def __init__(self, F: ArrayFn, Fx: ArrayFn, Fp: ArrayFn, eig: ArrayFn, n: int, options: ContinuationOptions,
+                 compiled: Compiled | None = None) -> None:
         self.F, self.Fx, self.Fp, self.eig = F, Fx, Fp, eig
         self.n = n
-        self.s = _scale(x_scale, n, "x_scale")
+        self.s = _scale(options.x_scale, n, "x_scale")
         # z -> tolerance units: (x / tol_scale, p)
+        tol_scale = options.tol_scale
         self.r = np.append(self.s / (_scale(tol_scale, n, "tol_scale") if tol_scale is not None else self.s), 1.0)
-        self.tol, self.tol_re = tol, tol_re
-        self.compiled = compiled(self.s, self.r, tol) if compiled is not None else None
+        self.tol, self.tol_re = options.tol, options.tol_re
+        self.compiled = compiled(self.s, self.r, self.tol) if compiled is not None else None
 
     # -- conversions and evaluations --------------------------------------------------------------
     def z_of(self, x: np.ndarray, p: float) -> np.ndarray:
@@ -250,12 +271,11 @@ def _real_crossing(ev0: np.ndarray, ev1: np.ndarray, tol_re: float):
 
 
 class _Continuation:
-    def __init__(self, tr: _Tracer, p_min: float, p_max: float, ds: float, ds_min: float, ds_max: float,
-                 max_steps: int) -> None:
+    def __init__(self, tr: _Tracer, p_min: float, p_max: float, options: ContinuationOptions) -> None:
         self.tr = tr
         self.p_min, self.p_max = float(p_min), float(p_max)
-        self.ds, self.ds_min, self.ds_max = float(ds), float(ds_min), float(ds_max)
-        self.max_steps = int(max_steps)
+        self.ds, self.ds_min, self.ds_max = float(options.ds), float(options.ds_min), float(options.ds_max)
+        self.max_steps = int(options.max_steps)
         self.hopf_at_end = False  # the previous step found a Hopf point exactly at its end
 
     def node(self, z: np.ndarray, t: np.ndarray) -> _Node:
@@ -558,16 +578,14 @@ class _Continuation:
 
 
 def _setup(F: ArrayFn, Fx: ArrayFn, Fp: ArrayFn, x0, p0: float, p_min: float, p_max: float, eig: ArrayFn,
-           ds: float, ds_min: float, ds_max: float, max_steps: int, tol: float, tol_re: float,
-           x_scale, tol_scale=None, compiled: Compiled | None = None) -> tuple[_Continuation, np.ndarray]:
+           options: ContinuationOptions, compiled: Compiled | None = None) -> tuple[_Continuation, np.ndarray]:
+    """The continuation of one start, corrected onto the branch at fixed p0 (ValueError when that fails)."""
     if not p_min < p_max:
         raise ValueError(f"continuation: need p_min < p_max, got [{p_min}, {p_max}]")
-    if not (0.0 < ds_min <= ds_max and ds > 0.0):
-        raise ValueError("continuation: need 0 < ds_min <= ds_max and ds > 0")
     if not p_min <= p0 <= p_max:
         raise ValueError(f"continuation: start parameter p0={p0} is outside [{p_min}, {p_max}]")
     x0 = np.atleast_1d(np.asarray(x0, dtype=float)).ravel()
-    tr = _Tracer(F, Fx, Fp, eig, len(x0), x_scale, tol, tol_re, tol_scale, compiled)
+    tr = _Tracer(F, Fx, Fp, eig, len(x0), options, compiled)
     z = tr.correct_fixed_p(tr.z_of(x0, p0), max_iter=_MAX_START_ITER, monotone=False)
     if z is None:
         try:
@@ -582,17 +600,16 @@ def _setup(F: ArrayFn, Fx: ArrayFn, Fp: ArrayFn, x0, p0: float, p_min: float, p_
         raise ValueError(f"continuation: Newton correction of the start point at fixed p={p0} did not converge "
                          f"in {_MAX_START_ITER} iterations (|F(x0, p0)| = {r:.3g}); x0 is not near an "
                          f"equilibrium at p0, or the Jacobian Fx is wrong")
-    return _Continuation(tr, p_min, p_max, ds, ds_min, ds_max, max_steps), z
+    return _Continuation(tr, p_min, p_max, options), z
 
 
 def continue_branch(F: ArrayFn, Fx: ArrayFn, Fp: ArrayFn, x0: np.ndarray | Sequence[float], p0: float,
-                    p_min: float, p_max: float, eig: ArrayFn, *, ds: float = 0.05, ds_min: float = 1e-6,
-                    ds_max: float = 0.5, max_steps: int = 2000, tol: float = 1e-10, tol_re: float = 1e-9,
-                    direction: float = +1.0, x_scale: float | np.ndarray | None = None,
-                    tol_scale: float | np.ndarray | None = None) -> Branch:
+                    p_min: float, p_max: float, eig: ArrayFn, *, direction: float = +1.0,
+                    **options: Any) -> Branch:
     """Follow the branch F(x, p) = 0 through (x0, p0) by pseudo-arclength continuation, in one direction.
 
-    The start is corrected by Newton at fixed p0 (``ValueError`` if that fails). The first tangent is the null
+    ``options``: the fields of ContinuationOptions (ds, ds_min, ds_max, max_steps, tol, tol_re, x_scale,
+    tol_scale), by name. The start is corrected by Newton at fixed p0 (``ValueError`` if that fails). The first tangent is the null
     vector of [Fx | Fp], oriented so that dp has the sign of ``direction``; if dp ~ 0 at the start (a start at a
     fold) it is oriented so that its first nonzero component has the sign of ``direction`` (positive for +1), and
     a fold exactly at the start is not reported (``sweep_parameter`` reports it). Arclength is measured in
@@ -612,8 +629,7 @@ def continue_branch(F: ArrayFn, Fx: ArrayFn, Fp: ArrayFn, x0: np.ndarray | Seque
     """
     if not direction:
         raise ValueError("continue_branch: direction must be nonzero")
-    cont, z0 = _setup(F, Fx, Fp, x0, p0, p_min, p_max, eig, ds, ds_min, ds_max, max_steps, tol, tol_re, x_scale,
-                      tol_scale)
+    cont, z0 = _setup(F, Fx, Fp, x0, p0, p_min, p_max, eig, ContinuationOptions(**options))
     return cont.run(z0, direction)[0]
 
 
@@ -650,28 +666,20 @@ def _on_branch(cont: _Continuation, branch: Branch, z: np.ndarray) -> bool:
 
 def sweep_parameter(F: ArrayFn, Fx: ArrayFn, Fp: ArrayFn, starts: list[tuple[np.ndarray, float]], p_min: float,
                     p_max: float, eig: ArrayFn, skipped: list[tuple[float, str]] | None = None,
-                    share: Share | None = None, compiled: Compiled | None = None, **kw: Any) -> list[Branch]:
+                    share: Share | None = None, compiled: Compiled | None = None,
+                    **options: Any) -> list[Branch]:
     """Trace each start both ways (direction -1 and +1) and merge the two halves into one branch along the arc.
 
     The merged points run from the end of the direction -1 half, through the start, to the end of the +1 half;
     bifurcation indices refer to the merged list. A start that lies on an already-traced branch is skipped; a
-    closed branch is traced once. ``kw`` are the keyword options of ``continue_branch`` (``direction`` ignored).
+    closed branch is traced once. ``options``: the fields of ContinuationOptions, as for ``continue_branch``.
     A start where ``eig`` raises Undefined is not traced; its (p, reason) is appended to ``skipped``. The starts
     are traced in forked workers where more than one process is available (numeric/parallel.py: the branches are
     those of the serial loop); ``share`` carries state of ``eig`` back from them (e.g. a memo). ``compiled`` makes
     a compiled corrector for a tracer (``Compiled``), which then replaces the Python Newton loop.
     """
-    kw = dict(kw)
-    kw.pop("direction", None)
-    opts = {k: kw[k] for k in ("ds", "ds_min", "ds_max", "max_steps", "tol", "tol_re", "x_scale", "tol_scale")
-            if k in kw}
-    unknown = set(kw) - set(opts)
-    if unknown:
-        raise TypeError(f"sweep_parameter: unknown options {sorted(unknown)}")
-    defaults = dict(ds=0.05, ds_min=1e-6, ds_max=0.5, max_steps=2000, tol=1e-10, tol_re=1e-9, x_scale=None,
-                    tol_scale=None)
-    defaults.update(opts)
-    setups = [_setup(F, Fx, Fp, x0, p0, p_min, p_max, eig, **defaults, compiled=compiled) for x0, p0 in starts]
+    chosen = ContinuationOptions(**options)
+    setups = [_setup(F, Fx, Fp, x0, p0, p_min, p_max, eig, chosen, compiled) for x0, p0 in starts]
 
     def half(j: int) -> tuple[Branch, bool] | str:
         """Start j // 2 traced forward (j even) or backward: (half branch, closed), or the reason eig is
