@@ -652,13 +652,15 @@ def simulate(
         check_figures(plot=plot)
         check_outputs(output, animate, events_file, impacts_file)
         check_model_file(file)  # before the warm path reads it: a FIFO would hang, a device never end
+        from mechsys.analysis.motion.simulate import SimulationOptions
         from mechsys.analysis.motion.warm import simulate_file
         from mechsys.report.progress import ProgressBar
 
         bar = ProgressBar(t_end)
+        options = SimulationOptions(t_end, dt, method, rtol, atol, capture, max_steps)
         try:
-            result, model = simulate_file(file, set_ or [], t_end, dt, method, rtol, atol, capture, max_steps,
-                                          progress=bar, need_model=bool(animate or reactions))
+            result, model = simulate_file(file, set_ or [], options, progress=bar,
+                                          need_model=bool(animate or reactions))
         finally:
             bar.close()
         names, data = result.columns()

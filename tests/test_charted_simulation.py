@@ -16,6 +16,7 @@ from typer.testing import CliRunner
 
 import mechsys
 from mechsys.analysis.motion.charted import simulate_charted
+from mechsys.analysis.motion.simulate import SimulationOptions
 from mechsys.cli import app
 from mechsys.numeric.rotations import angles_closed, angles_near, rate_matrix, ratio, ratio_at, rotation
 
@@ -161,7 +162,7 @@ def test_closed_form_angles_ratio_and_nearest_angles_for_every_sequence():
 def test_torque_free_body_started_exactly_at_gimbal_lock():
     """Before: 'coordinate singularity: the zyx angles ... are singular at this orientation' (exit 1)."""
     angles, rates = LOCK
-    r = simulate_charted(_load(BODY, angles, rates), 8.0, 0.01, **TOL)
+    r = simulate_charted(_load(BODY, angles, rates), SimulationOptions(8.0, 0.01, **TOL))
     R_ref, w_ref = reference([1, 2, 4], zyx(angles), zyx_omega(angles, rates), r.t)
     eR, ew = _errors(r, zyx, zyx_omega, R_ref, w_ref)
     assert eR < 1e-8 and ew < 1e-8, (eR, ew)
@@ -189,7 +190,7 @@ def test_motion_through_the_gimbal_lock_mid_run_reports_the_undefined_rates():
     """The body passes exactly through the lock at t = 1.5 s: the zyx chart is singular there to round-off, so
     der(psi) and der(phi) are NaN (named in a warning) while the angles stay continuous through it."""
     a0, d0 = _state_before(1.5)
-    r = simulate_charted(_load(BODY, a0, d0), 4.0, 0.01, **TOL)
+    r = simulate_charted(_load(BODY, a0, d0), SimulationOptions(4.0, 0.01, **TOL))
     R_ref, w_ref = reference([1, 2, 4], zyx(a0), zyx_omega(a0, d0), r.t)
     eR, ew = _errors(r, zyx, zyx_omega, R_ref, w_ref)
     assert eR < 1e-8 and ew < 1e-8, (eR, ew)
@@ -210,7 +211,7 @@ def test_motion_through_the_gimbal_lock_mid_run_reports_the_undefined_rates():
 def test_coarse_output_grid_switches_between_output_times():
     """With --dt 0.5 the switches fall between output rows; every row still matches the reference."""
     angles, rates = LOCK
-    r = simulate_charted(_load(BODY, angles, rates), 8.0, 0.5, **TOL)
+    r = simulate_charted(_load(BODY, angles, rates), SimulationOptions(8.0, 0.5, **TOL))
     assert len(r.t) == 17
     R_ref, w_ref = reference([1, 2, 4], zyx(angles), zyx_omega(angles, rates), r.t)
     eR, ew = _errors(r, zyx, zyx_omega, R_ref, w_ref)
@@ -228,7 +229,7 @@ def test_heavy_top_in_zxz_angles_passes_through_the_upright_position():
     theta0, spin = 0.5, 20.0
     dpsi = C * spin / (A * (1 + math.cos(theta0)))  # A psi' sin^2 + C w3 cos = C w3: equal momenta
     angles, rates = [0.0, theta0, 0.0], [dpsi, -4.0, spin - dpsi * math.cos(theta0)]
-    r = simulate_charted(_load(TOP, angles, rates), 3.0, 0.005, **TOL)
+    r = simulate_charted(_load(TOP, angles, rates), SimulationOptions(3.0, 0.005, **TOL))
     R_ref, w_ref = reference([A, A, C], zxz(angles), zxz_omega(angles, rates), r.t, weight=m * g * l)
     eR, ew = _errors(r, zxz, zxz_omega, R_ref, w_ref)
     assert eR < 1e-8 and ew < 1e-7, (eR, ew)  # |omega| is about 20 rad/s
@@ -268,14 +269,14 @@ def test_warm_plan_is_not_used_across_a_gimbal_lock(tmp_path):
     a0, d0 = _state_before(1.5)
     sets = [f"{n}={float(v)!r}" for n, v in zip(("psi", "theta", "phi"), a0)]
     sets += [f"der({n})={float(v)!r}" for n, v in zip(("psi", "theta", "phi"), d0)]
-    cold, model = simulate_file(path, sets, 0.5, 0.01, "auto", 1e-10, 1e-12)
+    cold, model = simulate_file(path, sets, SimulationOptions(0.5, 0.01))
     assert model is not None and not _switches(cold)
-    warm, model = simulate_file(path, sets, 0.5, 0.01, "auto", 1e-10, 1e-12)
+    warm, model = simulate_file(path, sets, SimulationOptions(0.5, 0.01))
     if model is not None:
         pytest.skip("no usable compiled-code cache here: the plan was not stored")
     assert np.array_equal(warm.q, cold.q)
-    assert run_planned(path, sets, 3.0, 0.01, "auto", 1e-10, 1e-12) is None
-    far, model = simulate_file(path, sets, 3.0, 0.01, "auto", 1e-10, 1e-12)
+    assert run_planned(path, sets, SimulationOptions(3.0, 0.01)) is None
+    far, model = simulate_file(path, sets, SimulationOptions(3.0, 0.01))
     assert model is not None and _switches(far) and "warm plan" not in " ".join(far.timings)
     assert np.max(np.abs(far.q[:51] - cold.q)) < 1e-9  # the first rows are the same motion
 
@@ -286,7 +287,7 @@ def test_a_model_with_explicit_time_is_not_recharted_and_says_so(tmp_path):
     path = tmp_path / "forced.yaml"
     path.write_text(BODY.read_text() + "forces:\n  - {type: torque, on: body, value: [0, 0, 0.001*sin(t)], "
                                        "frame: ground}\n")
-    r = simulate_charted(_load(path, [0.4, math.pi / 2 - 0.3, -0.3], [0.2, 0.1, 0.8]), 1.0, 0.01)
+    r = simulate_charted(_load(path, [0.4, math.pi / 2 - 0.3, -0.3], [0.2, 0.1, 0.8]), SimulationOptions(1.0, 0.01))
     assert not _switches(r)
     assert any(w.startswith("no chart switching: the rotation angles come within a conditioning ratio of 0.1")
                for w in r.warnings)

@@ -1,4 +1,6 @@
 """Guards against silent wrong answers in simulate: constraints left behind, and a work budget that bounds wall time."""
+import dataclasses
+import inspect
 import math
 import os
 import subprocess
@@ -9,7 +11,7 @@ import numpy as np
 import pytest
 
 import mechsys
-from mechsys.analysis.motion.simulate import RESIDUAL_TOLERANCE, simulate
+from mechsys.analysis.motion.simulate import RESIDUAL_TOLERANCE, SimulationOptions, simulate
 from mechsys.errors import AnalysisError
 from tests.helpers import DATA_DIR, ROOT, SYSTEMS_DIR
 
@@ -115,3 +117,13 @@ def test_the_spent_budget_names_the_cause_that_fits_the_method(method, advice):
         simulate(model, 0.1, method=method, max_steps=300)
     assert advice in str(caught.value)
     assert ("try --method Radau" in str(caught.value)) == (method != "Radau")
+
+
+def test_simulate_takes_the_options_objects_fields_by_name():
+    """simulate() is integrate() with the fields of SimulationOptions by name: the same names and defaults, so the
+    keyword entry point and the options object (what the CLI, the warm plans and the re-charted windows pass)
+    cannot drift apart."""
+    keywords = inspect.signature(simulate).parameters
+    for f in dataclasses.fields(SimulationOptions):
+        default = inspect.Parameter.empty if f.default is dataclasses.MISSING else f.default
+        assert keywords[f.name].default == default, f.name

@@ -69,9 +69,10 @@ def _modes(model: MechanicalModel, options: dict) -> Outputs:
 def _simulate(model: MechanicalModel, options: dict) -> Outputs:
     from mechsys.analysis.motion.charted import simulate_charted
     from mechsys.analysis.motion.outputs import add_outputs
+    from mechsys.analysis.motion.simulate import SimulationOptions
 
-    t_end = float(options.get("t_end", 10.0))
-    r = add_outputs(model, simulate_charted(model, t_end, options.get("dt"), options.get("method", "auto")))
+    run = SimulationOptions(float(options.get("t_end", 10.0)), options.get("dt"), options.get("method", "auto"))
+    r = add_outputs(model, simulate_charted(model, run))
     out: Outputs = {"t_end": float(r.t[-1]), "energy_drift": r.energy_drift,
                     "energy_balance": r.energy_balance_error, "impacts": len(r.impacts),
                     "max_residual": float(np.max(r.residual)), "rhs_evaluations": r.rhs_evaluations,

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Callable, Optional
 
 import numpy as np
@@ -13,7 +13,7 @@ from mechsys.errors import AnalysisError
 from mechsys.numeric.rotations import alternatives, angles_closed, angles_near, frame, rate_matrix, ratio_at
 
 if TYPE_CHECKING:  # the warm path (analysis/motion/warm.py) imports this module and must not import sympy
-    from mechsys.analysis.motion.simulate import SimulationResult
+    from mechsys.analysis.motion.simulate import SimulationOptions, SimulationResult
     from mechsys.mechanics.model import MechanicalModel
 
 
@@ -314,20 +314,20 @@ def _unswitched(result: SimulationResult, joints: list[tuple], opts: ChartOption
     return result
 
 
-def simulate_charted(model: MechanicalModel, t_end: float, dt: Optional[float] = None, method: str = "auto",
-                     rtol: float = 1e-10, atol: float = 1e-12, overrides_p: Optional[np.ndarray] = None,
-                     capture_velocity: float = 1e-10, progress: Optional[Callable[[float], None]] = None,
-                     max_steps: float = 1e6, options: ChartOptions = OPTIONS) -> SimulationResult:
-    """``simulate``, carrying spherical and free joints through gimbal lock (docs/simulate.md, "Rotations
-    through gimbal lock"). A run that never comes near a singular chart is ``simulate``'s own result, unchanged;
-    otherwise it continues from the last good output row in look-ahead windows, each a ``simulate`` run from
+def simulate_charted(model: MechanicalModel, run_options: SimulationOptions, overrides_p: Optional[np.ndarray] = None,
+                     progress: Optional[Callable[[float], None]] = None,
+                     options: ChartOptions = OPTIONS) -> SimulationResult:
+    """``integrate``, carrying spherical and free joints through gimbal lock (docs/simulate.md, "Rotations
+    through gimbal lock"). A run that never comes near a singular chart is ``integrate``'s own result, unchanged;
+    otherwise it continues from the last good output row in look-ahead windows, each an ``integrate`` run from
     t = 0 of the model re-derived in the joint's best-conditioned sequence, with its times shifted."""
     from mechsys.analysis.motion.simulate import (CVODE_TIGHTENING, EVALUATIONS_PER_STEP, METHODS, SimulationResult,
-                                           file_state, output_grid, simulate)
+                                                  file_state, integrate, output_grid)
 
-    joints = watched(model) if method in METHODS and t_end > 0 else []
+    t_end, dt, max_steps = run_options.t_end, run_options.dt, run_options.max_steps
+    joints = watched(model) if run_options.method in METHODS and t_end > 0 else []
     if not joints:
-        return simulate(model, t_end, dt, method, rtol, atol, overrides_p, capture_velocity, progress, max_steps)
+        return integrate(model, run_options, overrides_p, progress)
     from mechsys.numeric.parameters import parameter_values
     from mechsys.numeric.native import BUDGET_SPENT, budget_spent
 
@@ -339,21 +339,21 @@ def simulate_charted(model: MechanicalModel, t_end: float, dt: Optional[float] =
     totals = {"rhs": 0, "steps": 0, "used": 0.0, "seconds": 0.0}
     timings: dict[str, float] = {}
     warnings: list[str] = []
-    tol = {"method": method, "rtol": rtol, "atol": atol}
+    chosen = run_options  # the method and tolerances of every window: auto's choice holds for the whole run
 
     def run(m: MechanicalModel, length: float, h: Optional[float], shift: float,
             cap: float = math.inf) -> SimulationResult:
+        nonlocal chosen
         left = min(max_steps - totals["used"], cap)
         if left < 1:
-            raise AnalysisError(f"integration stopped at t = {shift:.6g}: {budget_spent(tol['method'])}")
+            raise AnalysisError(f"integration stopped at t = {shift:.6g}: {budget_spent(chosen.method)}")
         t1 = time.perf_counter()
-        res = simulate(m, length, h, tol["method"], tol["rtol"], tol["atol"], p, capture_velocity,
-                       None if progress is None else (lambda t: progress(shift + t)), left)
+        res = integrate(m, replace(chosen, t_end=length, dt=h, max_steps=left), p,
+                        None if progress is None else (lambda t: progress(shift + t)))
         totals["seconds"] += time.perf_counter() - t1
-        if tol["method"] == "auto":  # the choice holds for the whole run (auto runs CVODE at rtol/100)
-            tol["method"] = res.method
-            if res.method == "CVODE":
-                tol["rtol"], tol["atol"] = rtol / CVODE_TIGHTENING, atol / CVODE_TIGHTENING
+        if chosen.method == "auto":  # auto runs CVODE at rtol/100
+            tight = CVODE_TIGHTENING if res.method == "CVODE" else 1.0
+            chosen = replace(chosen, method=res.method, rtol=chosen.rtol / tight, atol=chosen.atol / tight)
         totals["rhs"] += res.rhs_evaluations
         totals["steps"] += res.steps or 0
         totals["used"] += res.steps if res.method == "native" else res.rhs_evaluations / EVALUATIONS_PER_STEP
@@ -371,16 +371,14 @@ def simulate_charted(model: MechanicalModel, t_end: float, dt: Optional[float] =
             kind = _first_change(joints, charts, first.t, first.q, first.u, options)[1]
         except AnalysisError:
             if not _autonomous(model):  # today's run, with the whole budget (and its message if it fails)
-                return simulate(model, t_end, dt, method, rtol, atol, overrides_p, capture_velocity, progress,
-                                max_steps)
+                return integrate(model, run_options, overrides_p, progress)
             first, kind = None, "failed"
         if kind == "":
             return first
         if not _autonomous(model):
             return _unswitched(first, joints, options)
     elif not _autonomous(model):
-        return _unswitched(simulate(model, t_end, dt, method, rtol, atol, overrides_p, capture_velocity, progress,
-                                    max_steps), joints, options)
+        return _unswitched(integrate(model, run_options, overrides_p, progress), joints, options)
     else:
         first, kind = None, "start"
     if first is not None:  # keep the good rows of the first run and go on from the last of them
@@ -436,7 +434,7 @@ def simulate_charted(model: MechanicalModel, t_end: float, dt: Optional[float] =
     notes += _note_undefined(state.undefined, options)
     timings["re-charting"] = max(0.0, time.perf_counter() - started - totals["seconds"])
     out = SimulationResult(list(model.coordinates), grid, state.Q, state.U, state.T, state.V, np.zeros(len(grid)),
-                           tol["method"], totals["rhs"], totals["steps"], timings, warnings + notes)
+                           chosen.method, totals["rhs"], totals["steps"], timings, warnings + notes)
     from mechsys.analysis.motion.simulate import compile_model, nonconservative_work
 
     with np.errstate(all="ignore"):  # the work rate in the file's angles, finite off the lock itself

@@ -26,6 +26,23 @@ SLOW_WINDOWS = 3  # consecutive windows whose pace would overspend the budget be
 CVODE_TIGHTENING = 100.0
 
 
+@dataclass(frozen=True)
+class SimulationOptions:
+    """What a run integrates and how (`mechsys simulate`'s options, docs/simulate.md): from t = 0 to ``t_end``,
+    outputs every ``dt`` (None: t_end / 1000), ``method`` (METHODS) at ``rtol`` and ``atol``, impacts slower than
+    ``capture_velocity`` ending in contact, and at most ``max_steps`` of work (the native loop's steps, or
+    EVALUATIONS_PER_STEP times as many right-hand-side evaluations elsewhere). Changed copies with
+    dataclasses.replace (a re-charted window, auto's tightened CVODE tolerances)."""
+
+    t_end: float
+    dt: float | None = None
+    method: str = "auto"
+    rtol: float = 1e-10
+    atol: float = 1e-12
+    capture_velocity: float = 1e-10
+    max_steps: float = 1e6
+
+
 @dataclass
 class Compiled:
     """Numeric callables a simulation needs, compiled once per model."""
@@ -764,10 +781,19 @@ def _plain_scipy(job: Integration, y0: np.ndarray) -> tuple:
 def simulate(model: MechanicalModel, t_end: float, dt: float | None = None, method: str = "auto",
              rtol: float = 1e-10, atol: float = 1e-12, overrides_p: np.ndarray | None = None,
              capture_velocity: float = 1e-10, progress=None, max_steps: float = 1e6) -> SimulationResult:
-    """Integrate from the file's initial state to t_end; outputs every dt (default t_end/1000).
-    ``progress(t)`` is called now and then with the time reached (for a progress bar). ``max_steps`` bounds the
-    work (the native loop's steps, or EVALUATIONS_PER_STEP times as many right-hand-side evaluations elsewhere), so
-    a chattering discontinuous law fails with a reason instead of running for hours."""
+    """Integrate from the file's initial state to t_end; outputs every dt (default t_end/1000): ``integrate`` with
+    the options by name (SimulationOptions tells what each does)."""
+    return integrate(model, SimulationOptions(t_end, dt, method, rtol, atol, capture_velocity, max_steps),
+                     overrides_p, progress)
+
+
+def integrate(model: MechanicalModel, options: SimulationOptions, overrides_p: np.ndarray | None = None,
+              progress: Callable[[float], None] | None = None) -> SimulationResult:
+    """The run ``options`` describe, from the file's initial state, at the parameter vector ``overrides_p`` (None:
+    the file's). ``progress(t)`` is called now and then with the time reached (for a progress bar). The work bound
+    makes a chattering discontinuous law fail with a reason instead of running for hours."""
+    t_end, dt, method, rtol, atol = options.t_end, options.dt, options.method, options.rtol, options.atol
+    capture_velocity, max_steps = options.capture_velocity, options.max_steps
     if method not in METHODS:
         raise InputError(f"--method: unknown method {method!r}; use one of {', '.join(METHODS)}")
     if t_end <= 0:

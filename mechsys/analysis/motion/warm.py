@@ -20,7 +20,7 @@ from typing import Callable, Optional, Sequence
 
 import numpy as np
 
-from mechsys.analysis.motion.simulate import SimulationResult
+from mechsys.analysis.motion.simulate import SimulationOptions, SimulationResult
 from mechsys.numeric import cache
 
 STIFF_STEPS = 5e4  # the same threshold as simulate.choose_method
@@ -77,11 +77,11 @@ def _load_plan(plan: dict) -> Optional[tuple]:
     return nat, c, p, y0
 
 
-def run_planned(path: Path, overrides: Sequence[str], t_end: float, dt: Optional[float], method: str,
-                rtol: float, atol: float, progress: Optional[Callable[[float], None]] = None,
-                max_steps: float = 1e6) -> Optional[SimulationResult]:
+def run_planned(path: Path, overrides: Sequence[str], options: SimulationOptions,
+                progress: Optional[Callable[[float], None]] = None) -> Optional[SimulationResult]:
     """The simulation from a stored plan, or None when there is no usable plan for this run (the caller then
     loads the model and runs `simulate`)."""
+    t_end, method, rtol, atol, max_steps = options.t_end, options.method, options.rtol, options.atol, options.max_steps
     if method not in ("auto", "native") or t_end <= 0:
         return None
     from mechsys.numeric.native import compiler
@@ -100,7 +100,7 @@ def run_planned(path: Path, overrides: Sequence[str], t_end: float, dt: Optional
 
     n, m = c.n, c.m
     load_seconds = time.perf_counter() - t0
-    grid = output_grid(t_end, dt)
+    grid = output_grid(t_end, options.dt)
     t1 = time.perf_counter()
     if m:
         Y, nfev, steps = native_projected(nat, c, p, grid, y0, rtol, atol, progress, max_steps)
@@ -169,8 +169,7 @@ def declares_outputs(path: Path) -> bool:
     return isinstance(data, dict) and bool(data.get("outputs"))
 
 
-def simulate_file(path: Path, overrides: Sequence[str], t_end: float, dt: Optional[float], method: str,
-                  rtol: float, atol: float, capture_velocity: float = 1e-10, max_steps: float = 1e6,
+def simulate_file(path: Path, overrides: Sequence[str], options: SimulationOptions,
                   progress: Optional[Callable[[float], None]] = None, need_model: bool = False) -> tuple:
     """What `mechsys simulate FILE` runs: (result, model or None). A repeated run of the same file and options
     starts from its plan (no model is built, so None) unless ``need_model`` (reactions, animations); otherwise the
@@ -182,16 +181,14 @@ def simulate_file(path: Path, overrides: Sequence[str], t_end: float, dt: Option
 
     t0 = time.perf_counter()
     need_model = need_model or declares_outputs(path)  # outputs are evaluated on the model
-    result = None if need_model else run_planned(path, overrides, t_end, dt, method, rtol, atol, progress,
-                                                 max_steps)
+    result = None if need_model else run_planned(path, overrides, options, progress)
     model = None
     if result is None:
         import mechsys
         from mechsys.model.load import parse_assignments
 
         model = mechsys.load(path, parse_assignments(list(overrides)), release_prescribed=True)
-        result = simulate_charted(model, t_end, dt, method, rtol, atol, capture_velocity=capture_velocity,
-                                  progress=progress, max_steps=max_steps)
+        result = simulate_charted(model, options, progress=progress)
         add_outputs(model, result)
         remember(path, overrides, model, result)
     result.timings = {"load": time.perf_counter() - t0 - sum(result.timings.values()), **result.timings}
