@@ -608,24 +608,23 @@ def continue_branch(F: ArrayFn, Fx: ArrayFn, Fp: ArrayFn, x0: np.ndarray | Seque
                     **options: Any) -> Branch:
     """Follow the branch F(x, p) = 0 through (x0, p0) by pseudo-arclength continuation, in one direction.
 
-    ``options``: the fields of ContinuationOptions (ds, ds_min, ds_max, max_steps, tol, tol_re, x_scale,
-    tol_scale), by name. The start is corrected by Newton at fixed p0 (``ValueError`` if that fails). The first tangent is the null
-    vector of [Fx | Fp], oriented so that dp has the sign of ``direction``; if dp ~ 0 at the start (a start at a
-    fold) it is oriented so that its first nonzero component has the sign of ``direction`` (positive for +1), and
+    ``options``: the fields of ContinuationOptions (ds, ds_min, ds_max, max_steps, tol, tol_re, x_scale, tol_scale),
+    by name. The start is corrected by Newton at fixed p0 (``ValueError`` if that fails). The first tangent is the
+    null vector of [Fx | Fp], oriented so that dp has the sign of ``direction``; if dp ~ 0 at the start (a start at
+    a fold) it is oriented so that its first nonzero component has the sign of ``direction`` (positive for +1), and
     a fold exactly at the start is not reported (``sweep_parameter`` reports it). Arclength is measured in
-    (x / x_scale, p): a large x_scale weights an unknown down (an auxiliary unknown that grows along the branch
-    would otherwise take the steps), while Newton still solves it to ``tol`` relative to ``tol_scale`` (default
-    x_scale). The branch ends when p leaves [p_min, p_max] (the last point is placed exactly on the
-    bound), after ``max_steps`` steps (``truncated``), when the step would drop below ``ds_min`` (the corrector
-    fails even there: the equations are not smooth, or not defined, beyond; ``stalled`` records p), or when it
-    closes on its start (the last point then repeats the first). Events are located between consecutive points:
-    "fold" (tangent dp changes sign), "branch_point" (det Fx changes sign without a fold), "zero_eigenvalue" (a
-    real eigenvalue of ``eig`` crosses 0 while the branch neither folds nor branches: ``eig`` sees more than Fx,
-    e.g. the extremum of a cyclic momentum along a family of steady motions), "hopf" (a simple complex pair of
-    ``eig`` crosses the imaginary axis transversally: Re < -tol_re on one side, > tol_re on the other) and
-    "collision" (the number of eigenvalues with Re > tol_re changes because two eigenvalues meet on the imaginary
-    axis and leave it: a conservative, gyroscopic branch, Krein collision; not a Hopf point); |Re| <= tol_re
-    counts as 0.
+    (x / x_scale, p): a large x_scale weights an unknown down (an auxiliary unknown that grows along the branch would
+    otherwise take the steps), while Newton still solves it to ``tol`` relative to ``tol_scale`` (default x_scale).
+    The branch ends when p leaves [p_min, p_max] (the last point is placed exactly on the bound), after
+    ``max_steps`` steps (``truncated``), when the step would drop below ``ds_min`` (the corrector fails even there:
+    the equations are not smooth, or not defined, beyond; ``stalled`` records p), or when it closes on its start
+    (the last point then repeats the first). Events are located between consecutive points: "fold" (tangent dp
+    changes sign), "branch_point" (det Fx changes sign without a fold), "zero_eigenvalue" (a real eigenvalue of
+    ``eig`` crosses 0 while the branch neither folds nor branches: ``eig`` sees more than Fx, e.g. the extremum of a
+    cyclic momentum along a family of steady motions), "hopf" (a simple complex pair of ``eig`` crosses the
+    imaginary axis transversally: Re < -tol_re on one side, > tol_re on the other) and "collision" (the number of
+    eigenvalues with Re > tol_re changes because two eigenvalues meet on the imaginary axis and leave it: a
+    conservative, gyroscopic branch, Krein collision; not a Hopf point); |Re| <= tol_re counts as 0.
     """
     if not direction:
         raise ValueError("continue_branch: direction must be nonzero")
