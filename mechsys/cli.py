@@ -10,11 +10,16 @@ import warnings
 from contextlib import contextmanager
 from enum import Enum
 from pathlib import Path
-from typing import Callable, Iterator, List, Optional
+from typing import TYPE_CHECKING, Callable, Iterator, List, Optional
 
 import typer
 
 from mechsys.errors import InputError, MechsysError
+
+if TYPE_CHECKING:
+    from mechsys.analysis.equilibrium.equilibria import SteadyOptions
+    from mechsys.mechanics.model import MechanicalModel
+    from mechsys.report.tables import Table
 
 app = typer.Typer(
     name="mechsys",
@@ -186,7 +191,7 @@ def run(action: Callable[[], int | None]) -> None:
     raise typer.Exit(code)
 
 
-def load_model(file: Path, assignments: Optional[List[str]]):
+def load_model(file: Path, assignments: Optional[List[str]]) -> MechanicalModel:
     import mechsys
     from mechsys.model.load import parse_assignments
 
@@ -304,7 +309,7 @@ class TableFormat(str, Enum):
     latex = "latex"
 
 
-def emit_tables(tables, fmt: "TableFormat", output: Optional[Path], payload: dict | None = None) -> None:
+def emit_tables(tables: list[Table], fmt: "TableFormat", output: Optional[Path], payload: dict | None = None) -> None:
     from mechsys.report.tables import render_tables
 
     rendered = render_tables(tables, fmt.value, payload)
@@ -368,7 +373,8 @@ def check_range(option: str, lo: float, hi: float, ordered: bool = True, ends: s
         raise InputError(f"{option}: {first} must be less than {second}")
 
 
-def steady_options(given: Optional[List[str]], solve: Optional[List[str]], independent: Optional[str]):
+def steady_options(given: Optional[List[str]], solve: Optional[List[str]],
+                   independent: Optional[str]) -> SteadyOptions:
     """--given, --solve and --independent as the library's SteadyOptions."""
     from mechsys.analysis.equilibrium.equilibria import SteadyOptions
 

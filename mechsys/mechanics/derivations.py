@@ -9,7 +9,7 @@ coordinate order, the code fingerprint and the formulation. A damaged, foreign o
 """
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Callable
 
 import sympy as sp
 
@@ -17,6 +17,7 @@ from mechsys.mechanics import serialize
 
 if TYPE_CHECKING:
     from mechsys.mechanics.model import Equations, MechanicalModel
+    from mechsys.mechanics.symmetry import CyclicDecision
 
 PARTS = ("M", "f", "Q", "A", "b")  # matrices; then T and V
 
@@ -74,7 +75,7 @@ def load(model: MechanicalModel, method: str) -> Equations | None:
                      mats["A"], mats["b"], [c.name for c in model.kin.constraints])
 
 
-def cyclic_decision(model: MechanicalModel, decide):
+def cyclic_decision(model: MechanicalModel, decide: Callable[[MechanicalModel], CyclicDecision]) -> CyclicDecision:
     """``decide(model)`` (mechanics/symmetry.py), remembered on disk: it compiles M, f, A, b and Phi for its shift
     test, the larger part of `info` on a 3-D model. It depends on the structure and on the parameter values
     (generic values are drawn around them; a declared symmetry is checked at them), so both are in the key."""
@@ -99,7 +100,7 @@ def cyclic_decision(model: MechanicalModel, decide):
     return out
 
 
-def autonomous_decision(model: MechanicalModel, method: str, decide) -> bool:
+def autonomous_decision(model: MechanicalModel, method: str, decide: Callable[[], bool]) -> bool:
     """``decide()`` (MechanicalModel.is_autonomous: whether t appears in M, f, A, b, a scan of the whole
     equations), remembered on disk. It reads the structure and, where t appears, the parameter values (d/dt = 0
     is checked numerically at them), so both are in the key."""

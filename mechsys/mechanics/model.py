@@ -3,6 +3,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
 from functools import cached_property
+from typing import TYPE_CHECKING
 
 import sympy as sp
 
@@ -13,6 +14,9 @@ from mechsys.mechanics.kinematics import FrameState, rate_coefficients, time_der
 from mechsys.mechanics.products import gram, nonzero, product
 from mechsys.model.load import T as TIME
 from mechsys.model.load import Document
+
+if TYPE_CHECKING:
+    from mechsys.mechanics.symmetry import CyclicDecision
 
 METHODS = ("lagrange", "kane")
 #: The formulation the commands read facts off (mass matrix, cyclic coordinates, explicit time): Kane's needs no
@@ -441,7 +445,7 @@ class MechanicalModel:
         return list(self.cyclic_decision.names)
 
     @cached_property
-    def cyclic_decision(self):
+    def cyclic_decision(self) -> CyclicDecision:
         from mechsys.mechanics import derivations
         from mechsys.mechanics.symmetry import decide
 

@@ -2,11 +2,15 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import sympy as sp
 from sympy.physics import mechanics as me
 
 from mechsys.mechanics.kinematics import FrameState
+
+if TYPE_CHECKING:
+    from mechsys.mechanics.model import MechanicalModel
 
 
 @dataclass
@@ -30,7 +34,7 @@ class PhysicsModel:
     to_symbols: dict = field(default_factory=dict)
 
 
-def physics_model(model) -> PhysicsModel:
+def physics_model(model: MechanicalModel) -> PhysicsModel:
     """Build frames, points, rigid bodies/particles and loads for ``model`` (a MechanicalModel)."""
     qd = [me.dynamicsymbols(f"q_{n}") for n in model.coordinates]
     ud = [me.dynamicsymbols(f"u_{n}") for n in model.coordinates]
@@ -111,7 +115,7 @@ def _generalized(model, load) -> sp.Matrix:
     return out + model.nonconservative_forces([load])
 
 
-def sympy_kane(model) -> tuple[sp.Matrix, sp.Matrix]:
+def sympy_kane(model: MechanicalModel) -> tuple[sp.Matrix, sp.Matrix]:
     """M and f from sympy.physics.mechanics.KanesMethod on the physics objects (unconstrained systems),
     translated back to mechsys symbols; used to validate mechsys's own derivations."""
     pm = physics_model(model)

@@ -31,6 +31,7 @@ from mechsys.errors import InputError
 from mechsys.model.expressions import ExpressionError, Quantities
 
 if TYPE_CHECKING:
+    from mechsys.mechanics.kinematics import FrameState
     from mechsys.mechanics.model import MechanicalModel
 
 #: name -> (smallest, largest) number of arguments
@@ -133,13 +134,13 @@ class ModelQuantities(Quantities):
         return sym
 
     # ------------------------------------------------------------------------------------- references
-    def point(self, ref: str, at: int):
+    def point(self, ref: str, at: int) -> tuple[FrameState, sp.Matrix]:
         try:
             return self.builder.point_on(ref, ("outputs",))
         except InputError as exc:  # naming the reference: reported at the argument's column
             raise ExpressionError(exc.message, at) from None
 
-    def frame_of(self, ref: str, at: int):
+    def frame_of(self, ref: str, at: int) -> FrameState:
         if "." in ref:
             raise ExpressionError(f"expected a link name, got the point {ref!r}", at)
         return self.point(ref, at)[0]

@@ -3,11 +3,15 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from itertools import islice
+from typing import TYPE_CHECKING
 
 import numpy as np
 import sympy as sp
 
 from mechsys.mechanics.dag import Evaluation, FreeSymbols
+
+if TYPE_CHECKING:
+    from mechsys.mechanics.model import MechanicalModel
 
 #: A coordinate is numerically cyclic when shifting it changes no entry of M, f, A, b by more than this (relative).
 ROUND_OFF = 1e-9
@@ -35,7 +39,7 @@ class CyclicDecision:
     denied: list[str] = field(default_factory=list)  # the file says `cyclic: false`
 
 
-def decide(model) -> CyclicDecision:
+def decide(model: MechanicalModel) -> CyclicDecision:
     """The cyclic coordinates of ``model``: the equations of motion (M, f, the constraint rows A, b and the
     holonomic constraints Phi themselves) do not depend on them. Phi matters: a slider closing a loop enters the
     velocity rows only through constant coefficients, yet shifting it alone opens the loop. Decided at the file's parameter values with every nonzero value varied randomly (a generic

@@ -26,7 +26,10 @@ import os
 import stat
 import tempfile
 from pathlib import Path
-from typing import Any, Optional
+from typing import TYPE_CHECKING, Any, Optional
+
+if TYPE_CHECKING:
+    from mechsys.mechanics.model import MechanicalModel
 
 MAX_ENTRY_BYTES = 512 * 1024 * 1024  # nothing the cache writes is larger; a larger file is not read
 _MAGIC = b"mechsys-cache-1 "
@@ -171,7 +174,7 @@ def _structure(raw: dict) -> dict:
     return data
 
 
-def model_key(model, what: str) -> str:
+def model_key(model: MechanicalModel, what: str) -> str:
     """Key of a cache entry ``what`` for this model: structure in file order, decisions, code version."""
     from mechsys import __version__
 

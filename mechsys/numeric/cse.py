@@ -10,7 +10,7 @@ on every bundled model's equations and the chains'.
 """
 from __future__ import annotations
 
-from typing import Sequence
+from typing import Any, Iterable, Iterator, Sequence
 
 import sympy as sp
 from sympy.simplify import cse_main
@@ -18,7 +18,8 @@ from sympy.simplify import cse_main
 __all__ = ["cse", "match_common_args"]
 
 
-def cse(exprs: Sequence[sp.Expr], symbols=None, order: str = "none") -> tuple[list, list]:
+def cse(exprs: Sequence[sp.Expr], symbols: Iterator[sp.Symbol] | None = None,
+        order: str = "none") -> tuple[list, list]:
     """sympy.cse(exprs, symbols, order) with match_common_args below."""
     original = getattr(cse_main, "match_common_args", None)
     if original is None:  # a sympy without it: its own cse
@@ -92,7 +93,7 @@ class _Tracker:
             self.arg_to_funcs[arg].discard(f)
 
 
-def match_common_args(func_class, funcs, opt_subs) -> None:
+def match_common_args(func_class: type[sp.Basic], funcs: Iterable[sp.Basic], opt_subs: dict[sp.Basic, Any]) -> None:
     """sympy.simplify.cse_main.match_common_args (sympy 1.12-1.14), step for step, on sets."""
     funcs = sorted(funcs, key=lambda f: len(f.args))
     tracker = _Tracker(funcs)

@@ -6,13 +6,16 @@ same numbers as the symbolic M and f (tests check this)."""
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Sequence
+from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
 import sympy as sp
 
 from mechsys.numeric.lambdify import function_from_source, generate_source
 from mechsys.numeric.runtime import call_generated
+
+if TYPE_CHECKING:
+    from mechsys.mechanics.model import MechanicalModel
 
 
 @dataclass
@@ -55,7 +58,7 @@ class CompiledEquations:
         return M, f
 
 
-def compile_equations(model) -> CompiledEquations:
+def compile_equations(model: MechanicalModel) -> CompiledEquations:
     """Compile the model's Kane terms into one numpy function (parameters stay inputs)."""
     return equations_from_source(equations_source(model))
 
@@ -64,7 +67,7 @@ def equations_from_source(desc: dict) -> CompiledEquations:
     return CompiledEquations(desc["n"], [tuple(b) for b in desc["bodies"]], function_from_source(desc["source"]))
 
 
-def equation_pieces(model) -> tuple[list, list[tuple[bool, bool]]]:
+def equation_pieces(model: MechanicalModel) -> tuple[list, list[tuple[bool, bool]]]:
     """The staged Kane terms as one flat list of expressions and the body layout that says how to assemble them
     (the order ``CompiledEquations.evaluate`` and the native integrator read them in)."""
     pieces: list = []
@@ -89,14 +92,14 @@ def equation_pieces(model) -> tuple[list, list[tuple[bool, bool]]]:
     return pieces, layout
 
 
-def equations_source(model) -> dict:
+def equations_source(model: MechanicalModel) -> dict:
     """Cacheable description of the staged equations: sizes, body layout and generated source."""
     pieces, layout = model_pieces(model)
     source = generate_source(pieces, [model.t, *model.q, *model.u, *model.parameter_symbols])
     return {"n": len(model.q), "bodies": [list(b) for b in layout], "source": source}
 
 
-def model_pieces(model) -> tuple[list, list[tuple[bool, bool]]]:
+def model_pieces(model: MechanicalModel) -> tuple[list, list[tuple[bool, bool]]]:
     """``equation_pieces`` memoised on the model (the Python and the native code generators share them)."""
     cached = getattr(model, "_equation_pieces", None)
     if cached is None:

@@ -7,7 +7,7 @@ from __future__ import annotations
 import math
 from collections import OrderedDict
 from dataclasses import dataclass
-from typing import Callable, Sequence
+from typing import Callable, Iterator, Sequence
 
 import sympy as sp
 from sympy.printing.pycode import PythonCodePrinter
@@ -197,7 +197,7 @@ def generate_source(exprs: Sequence[sp.Expr], args: Sequence[sp.Symbol], light: 
     return "\n".join(lines)
 
 
-def light_cse(exprs: list[sp.Expr], symbols=None) -> tuple[list, list]:
+def light_cse(exprs: list[sp.Expr], symbols: Iterator[sp.Symbol] | None = None) -> tuple[list, list]:
     """sympy's cse without its search for common sub-sums and sub-products (opt_cse): only the shared subtrees
     become temporaries. The bicycle's M, f, A, b: 0.25 s instead of 0.8 s, with a quarter more operations; for
     code that runs a few times (info's ranks, the cyclic test), not in a loop. sympy's full cse where its internal

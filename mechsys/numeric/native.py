@@ -19,11 +19,17 @@ import tempfile
 import threading
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Optional, Sequence
+from typing import TYPE_CHECKING, Callable, Optional, Sequence
 
 import numpy as np
 
 from mechsys.errors import AnalysisError
+
+if TYPE_CHECKING:  # sympy and the model are imported only where used: a warm run needs neither
+    import sympy as sp
+
+    from mechsys.mechanics.model import MechanicalModel
+    from mechsys.numeric.lambdify import ForwardProgram
 
 TEMPLATE = Path(__file__).with_name("dop853.c")
 BUDGET_SPENT = "the step budget (--max-steps) is spent"
@@ -168,7 +174,7 @@ def _c_printer(names: dict, fast: bool = True):
     return Printer()
 
 
-def c_power(base: str, x) -> Optional[str]:
+def c_power(base: str, x: sp.Expr) -> Optional[str]:
     """C text of ``base`` (a name or a parenthesized operand) to the sympy number ``x`` when x is an integer or
     a half: exact products up to the fourth power (as Python's x**2 is), sqrt for halves; None otherwise."""
     if x.is_Integer:
@@ -188,7 +194,7 @@ def c_power(base: str, x) -> Optional[str]:
 _SHARED = "__attribute__((visibility(\"hidden\"))) void"
 
 
-def pieces_source(blocks: Sequence[Sequence], t, q: Sequence, u: Sequence, params: Sequence,
+def pieces_source(blocks: Sequence[Sequence], t: sp.Symbol, q: Sequence, u: Sequence, params: Sequence,
                   name: str = "pieces", linkage: str = "static void") -> str:
     """C function ``name(t, q, u, p, out)`` writing the expressions of ``blocks`` one after the other into ``out``.
     Each block's shared subexpressions are computed once, from the same CSE as the block's Python code
@@ -271,12 +277,12 @@ def _dop853_coefficients():
     return dop853_coefficients
 
 
-def model_source(model) -> str:
+def model_source(model: MechanicalModel) -> str:
     """The complete C translation unit for one model structure."""
     return "\n".join(model_sources(model, split=False))
 
 
-def model_sources(model, split: bool = True) -> list[str]:
+def model_sources(model: MechanicalModel, split: bool = True) -> list[str]:
     """The C translation units of one model structure: the staged equations, the constraint rows and the
     integrator template, which the compiler then builds at once, one process each (on two cores the bicycle's
     -O2 build takes 0.35 s instead of 0.76 s; the rows alone take 0.32 s); or (``split`` False) one unit."""
@@ -465,7 +471,7 @@ class NativeIntegrator:
                          float(counters[3]), float(counters[4]))
 
 
-def start(model) -> None:
+def start(model: MechanicalModel) -> None:
     """Start compiling the model's native integrator (when a compiler is there and the library is not cached), so
     that the compiler runs while the caller generates its Python code; load() takes the result."""
     from mechsys.numeric import cache
@@ -505,7 +511,7 @@ def _native_key(model) -> str:
     return cache.model_key(model, f"native-{sys.platform}-{platform.machine()}")
 
 
-def load(model) -> Optional[NativeIntegrator]:
+def load(model: MechanicalModel) -> Optional[NativeIntegrator]:
     """The model's native integrator, from the cache (only when its signature verifies), from start()'s build, or
     compiled now; None when no compiler is available. Without a usable cache the library is built in a temporary
     folder that is removed once it is loaded. With constraints the accelerations solve
@@ -541,7 +547,7 @@ def load(model) -> Optional[NativeIntegrator]:
 
 
 # ----------------------------------------------------------------------------------------- straight-line programs
-def program_source(program, functions: dict[str, tuple[int, bool]]) -> Optional[str]:
+def program_source(program: ForwardProgram, functions: dict[str, tuple[int, bool]]) -> Optional[str]:
     """C translation unit of a ForwardProgram (numeric/lambdify.py): for each ``name: (count, with_jacobian)`` of
     ``functions`` a function ``name(const double *a, double *out)`` writing the first ``count`` outputs (and then
     the Jacobian rows); every function computes all shared subexpressions (at -O0 none is dropped; the bicycle's

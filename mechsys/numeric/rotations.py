@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import itertools
 import math
+from typing import Sequence
 
 import numpy as np
 
@@ -19,7 +20,7 @@ def _elementary(axis: str, angle: float) -> np.ndarray:
     return R
 
 
-def rotation(sequence: str, angles) -> np.ndarray:
+def rotation(sequence: str, angles: Sequence[float] | np.ndarray) -> np.ndarray:
     """Body-fixed (intrinsic) sequence: R = R1(a1) R2(a2) R3(a3), frame components -> parent components."""
     R = np.eye(3)
     for axis, angle in zip(sequence, angles):
@@ -27,7 +28,7 @@ def rotation(sequence: str, angles) -> np.ndarray:
     return R
 
 
-def rate_matrix(sequence: str, angles) -> np.ndarray:
+def rate_matrix(sequence: str, angles: Sequence[float] | np.ndarray) -> np.ndarray:
     """W with omega (child components) = W @ angle rates."""
     cols = []
     for k, axis in enumerate(sequence):
@@ -59,7 +60,7 @@ def _wrap(a) -> np.ndarray:
     return np.remainder(np.asarray(a, dtype=float) + np.pi, 2 * np.pi) - np.pi
 
 
-def canonical(sequence: str, a) -> np.ndarray:
+def canonical(sequence: str, a: Sequence[float] | np.ndarray) -> np.ndarray:
     """The one of the two angle triples of a rotation that is conventional: middle angle in [-pi/2, pi/2] for
     Cardan sequences (xyz), in [0, pi] for proper Euler ones (zxz); the others in (-pi, pi]. The alternative is
     (a1 + pi, pi - a2, a3 + pi) for Cardan and (a1 + pi, -a2, a3 + pi) for Euler sequences."""
@@ -70,7 +71,7 @@ def canonical(sequence: str, a) -> np.ndarray:
     return a
 
 
-def other_branch(sequence: str, a) -> np.ndarray:
+def other_branch(sequence: str, a: Sequence[float] | np.ndarray) -> np.ndarray:
     """The other angle triple of the same rotation (not wrapped): (a1 + pi, pi - a2, a3 + pi) for Cardan,
     (a1 + pi, -a2, a3 + pi) for proper Euler sequences."""
     a = np.asarray(a, dtype=float)
@@ -101,7 +102,7 @@ def log_vector(R: np.ndarray) -> np.ndarray:
     return angle * (axis if axis @ vee >= 0 else -axis)
 
 
-def frame(sequence: str, angles) -> tuple[np.ndarray, np.ndarray]:
+def frame(sequence: str, angles: Sequence[float] | np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``(rotation(sequence, angles), rate_matrix(sequence, angles))`` of a three-angle sequence in one pass."""
     E1, E2, E3 = (_elementary(axis, float(x)) for axis, x in zip(sequence, angles))
     E23 = E2 @ E3
@@ -148,7 +149,7 @@ def _newton(sequence: str, R: np.ndarray, a: np.ndarray) -> tuple[np.ndarray, fl
     return a, misfit if math.isfinite(misfit) else math.inf
 
 
-def angles_near(sequence: str, R: np.ndarray, near) -> np.ndarray | None:
+def angles_near(sequence: str, R: np.ndarray, near: Sequence[float] | np.ndarray) -> np.ndarray | None:
     """Angles of ``sequence`` giving R closest to ``near``: the closed form polished by Newton, or near a gimbal
     lock (ratio below 1e-3, where the closed form's split is arbitrary) Newton from ``near`` itself; then the
     nearer of the two triples, each shifted by multiples of 2 pi towards ``near``. They reproduce R to 1e-12, or

@@ -4,11 +4,16 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import sympy as sp
 
 from mechsys.errors import InputError
+
+if TYPE_CHECKING:
+    from mechsys.analysis.motion.simulate import SimulationResult
+    from mechsys.mechanics.model import MechanicalModel
 
 MAX_FRAMES = 200
 GROUND_JOINTS = {"revolute", "prismatic", "cylindrical", "universal", "spherical"}  # joints that are supports
@@ -53,7 +58,7 @@ def _same(a: sp.Matrix, b: sp.Matrix) -> bool:
     return all(sp.expand(x - y) == 0 for x, y in zip(a, b))
 
 
-def geometry(model) -> Geometry:
+def geometry(model: MechanicalModel) -> Geometry:
     """The points of every link (origin, centre of mass, named points, child joints, rod ends) and the ground's
     supports and named points, as symbolic world positions."""
     from mechsys.mechanics.build import Builder
@@ -127,7 +132,8 @@ def sample_indices(n: int, max_frames: int = MAX_FRAMES) -> np.ndarray:
     return np.unique(np.round(np.linspace(0, n - 1, max_frames)).astype(int))
 
 
-def evaluate(model, geo: Geometry, t: np.ndarray, q: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def evaluate(model: MechanicalModel, geo: Geometry, t: np.ndarray, q: np.ndarray,
+             u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """World positions (frames, points, 3) and link angular velocities (frames, links, 3) at the given states."""
     from mechsys.numeric.parameters import parameter_values
     from mechsys.numeric.lambdify import compile_matrix
@@ -179,7 +185,7 @@ def plane_basis(n: np.ndarray) -> tuple[np.ndarray, tuple[str, str]]:
     return np.vstack([e1, np.cross(n, e1)]), ("in-plane axis 1 [m]", "in-plane axis 2 [m]")
 
 
-def animation_frames(model, result, source: str | os.PathLike | None = None,
+def animation_frames(model: MechanicalModel, result: SimulationResult, source: str | os.PathLike | None = None,
                      max_frames: int = MAX_FRAMES) -> Frames:
     """Sample a run, check that it is planar and project the drawn points onto its plane."""
     geo = geometry(model)
@@ -219,7 +225,7 @@ def gif_delay_ms(fps: float) -> int:
     return int(min(5000, max(20, 10 * round(100.0 / fps))))
 
 
-def write_animation(model, result, path: str | os.PathLike, fps: float | None = None,
+def write_animation(model: MechanicalModel, result: SimulationResult, path: str | os.PathLike, fps: float | None = None,
                     source: str | os.PathLike | None = None, max_frames: int = MAX_FRAMES) -> int:
     """Write the animated GIF of a planar run atomically; returns the number of frames."""
     path = Path(path)

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import json
 import re
-from typing import Callable
+from typing import TYPE_CHECKING, Callable
 
 import sympy as sp
 
@@ -11,6 +11,9 @@ from mechsys.mechanics.model import Equations
 from mechsys.report.printing import (AUTO_NODES, SubexpressionNames, collecting, definition_latex, definition_text,
                                      naming, shared_subexpressions, to_latex, to_text)
 from mechsys.report.readable import readable, stored_readable
+
+if TYPE_CHECKING:
+    from mechsys.mechanics.model import MechanicalModel
 
 FORMATS = ("text", "markdown", "latex", "json")
 SUBEXPRESSIONS = ("auto", "inline", "named")
@@ -208,7 +211,8 @@ def to_json_dict(eq: Equations, name: str, where: Where = ()) -> dict:
     return data
 
 
-def render(eq: Equations, name: str, fmt: str, extra: dict | None = None, raw: bool = False, model=None,
+def render(eq: Equations, name: str, fmt: str, extra: dict | None = None, raw: bool = False,
+           model: MechanicalModel | None = None,
            subexpressions: str = "auto") -> str:
     """The equations in a format. Text, Markdown and LaTeX print the readable form (report/readable.py: exact
     clean-up within a time budget, a one-line note when it runs out) unless raw; JSON is always as derived.

@@ -1,11 +1,18 @@
 """Tables for equilibria, stability, linearization, sweeps and vibration modes."""
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from mechsys.analysis.equilibrium.equilibria import EquilibriaResult
 from mechsys.analysis.equilibrium.linearize import Linearization
 from mechsys.report.tables import Table, fmt_number
+
+if TYPE_CHECKING:
+    from mechsys.analysis.equilibrium.bifurcation import SweepResult
+    from mechsys.analysis.equilibrium.modes import Modes
+    from mechsys.analysis.equilibrium.nonholonomic import SteadyLinearization
 
 
 def mode_rows(eigenvalues: np.ndarray) -> list[tuple[complex, float, float]]:
@@ -147,7 +154,7 @@ def symbolic_tables(mats: dict, names: list[str]) -> list[Table]:
     return tables
 
 
-def sweep_tables(result) -> list[Table]:
+def sweep_tables(result: SweepResult) -> list[Table]:
     t = Table(f"branches over {result.parameter}", ["branch", result.parameter, *result.names, "stable", "verdict"])
     for row in result.rows():
         t.add(*row)
@@ -159,7 +166,7 @@ def sweep_tables(result) -> list[Table]:
     return [b, t]
 
 
-def modes_tables(modes) -> list[Table]:
+def modes_tables(modes: Modes) -> list[Table]:
     t = Table(f"natural frequencies about {', '.join(f'{c} = {fmt_number(v)}' for c, v in modes.equilibrium.coordinates.items()) or 'the equilibrium'}",
               ["mode", "frequency [rad/s]", "frequency [Hz]", "damping ratio", "rigid body"])
     for k, (w, z, r) in enumerate(zip(modes.frequencies, modes.damping_ratios, modes.rigid_body), start=1):
@@ -176,7 +183,8 @@ def modes_tables(modes) -> list[Table]:
     return [t, s]
 
 
-def steady_linearization_tables(lin, label: str, independent: list[str] | None, hurwitz: bool) -> list[Table]:
+def steady_linearization_tables(lin: SteadyLinearization, label: str, independent: list[str] | None,
+                                hurwitz: bool) -> list[Table]:
     """Nonholonomic steady motion (analysis/equilibrium/nonholonomic.py): Kane's M, C, K over the independent speeds, the
     kinematic rows, the first-order A and B; with --independent, the second-order form over those coordinates."""
     from mechsys.errors import AnalysisError

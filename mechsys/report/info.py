@@ -2,8 +2,12 @@
 from __future__ import annotations
 
 import json
+from typing import TYPE_CHECKING
 
 from mechsys.analysis.facts import Info
+
+if TYPE_CHECKING:
+    from rich.console import Group
 
 
 def render_json(info: Info) -> str:
@@ -50,7 +54,7 @@ def render_markdown(info: Info) -> str:
     return "\n".join(out) + "\n"
 
 
-def render_rich(info: Info):  # -> rich renderable
+def render_rich(info: Info) -> Group:  # -> rich renderable
     from rich.console import Group
     from rich.table import Table
 

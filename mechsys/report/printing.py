@@ -265,7 +265,7 @@ class YamlExprPrinter(_PrintsEachNodeOnce, StrPrinter):
         sign = out.pop(0)
         return ("" if sign == "+" else sign) + " ".join(out)
 
-    def parenthesize(self, item, level, strict: bool = False) -> str:
+    def parenthesize(self, item: sp.Basic, level: int, strict: bool = False) -> str:
         """StrPrinter.parenthesize (the same text) with the precedence asked once and remembered."""
         if _named(item):
             return self._print(item)

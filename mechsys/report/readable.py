@@ -5,13 +5,16 @@ import math
 from dataclasses import dataclass, replace
 from functools import cmp_to_key, reduce
 from itertools import combinations, product
-from typing import Callable, Iterator, TypeVar
+from typing import TYPE_CHECKING, Callable, Iterator, TypeVar
 
 import sympy as sp
 from sympy.core.add import _addsort
 from sympy.core.mul import _keep_coeff, _mulsort
 
 from mechsys.mechanics.model import Equations
+
+if TYPE_CHECKING:
+    from mechsys.mechanics.model import MechanicalModel
 
 #: Work one command may spend on the clean-up, in node visits; what is left is printed as derived (and reported).
 #: A count, not a time: what is printed must not depend on the machine or its load. The bicycle's whole clean-up
@@ -720,7 +723,7 @@ def clean_expression(expr: sp.Expr, budget: int | None = None) -> sp.Expr:
     return _Cleaner(_Work(BUDGET_VISITS if budget is None else budget), angles=True).clean(sp.sympify(expr))
 
 
-def stored_readable(model, eq: Equations, budget: int | None = None) -> Cleanup:
+def stored_readable(model: MechanicalModel, eq: Equations, budget: int | None = None) -> Cleanup:
     """readable(eq) for ``model``'s own derived equations, kept in the derivation cache as data (the entries the
     clean-up changed, through mechanics/serialize.py's whitelist, and the budget's counts), so a second `derive`
     of the model prints without cleaning up again. Only the changed entries are stored: the rest are the derived

@@ -4,11 +4,15 @@ from __future__ import annotations
 import json
 import re
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from mechsys.errors import InputError
 from mechsys.report.tables import Table
+
+if TYPE_CHECKING:
+    from mechsys.analysis.motion.simulate import SimulationResult
 
 
 RESULT_SUFFIXES = ".csv, .json or .parquet"
@@ -225,7 +229,7 @@ def _read_parquet(path: Path) -> tuple[list[str], np.ndarray]:
     return names, np.column_stack(columns) if columns[0].size else np.zeros((0, len(names)))
 
 
-def summary_table(result) -> list[Table]:
+def summary_table(result: SimulationResult) -> list[Table]:
     t = Table("simulation summary", ["quantity", "value"])
     t.add("method", result.method)
     t.add("output points", len(result.t))
@@ -265,7 +269,7 @@ def summary_table(result) -> list[Table]:
     return [t]
 
 
-def summary_payload(result) -> dict:
+def summary_payload(result: SimulationResult) -> dict:
     """The JSON of the summary: one object keyed by quantity (the rows of summary_table), and the notes."""
     (table,) = summary_table(result)
     return {"simulation summary": {row[0]: row[1] for row in table.rows}, "notes": list(table.notes)}

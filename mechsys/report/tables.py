@@ -5,6 +5,10 @@ import csv
 import io
 import json
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from rich.console import Group
 
 TABLE_FORMATS = ("text", "json", "csv", "markdown", "latex")
 
@@ -20,7 +24,7 @@ class Table:
         self.rows.append(list(cells))
 
 
-def fmt_number(x, digits: int = 6) -> str:
+def fmt_number(x: object, digits: int = 6) -> str:
     if isinstance(x, complex):
         if abs(x.imag) < 1e-15 * max(1.0, abs(x.real)):
             return fmt_number(x.real, digits)
@@ -93,7 +97,7 @@ def _plain_text(t: Table, Text):
     return Text("\n".join([t.title, *lines]), no_wrap=True, overflow="ignore")
 
 
-def to_rich(tables: list[Table]):
+def to_rich(tables: list[Table]) -> Group:
     from rich.console import Group
     from rich.table import Table as RichTable
 

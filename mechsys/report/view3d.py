@@ -12,6 +12,7 @@ import importlib.util
 import os
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import sympy as sp
@@ -19,6 +20,11 @@ import sympy as sp
 from mechsys.errors import AnalysisError, InputError
 from mechsys.report.animation import (MAX_FRAMES, Geometry, LinkSketch, check_animation_path, default_fps, geometry,
                                       sample_indices, write_animation)
+
+if TYPE_CHECKING:
+    from mechsys.analysis.motion.simulate import SimulationResult
+    from mechsys.mechanics.model import MechanicalModel
+    from mechsys.model.load import Document
 
 HTML_SUFFIXES = (".html", ".htm")
 DIV_ID = "mechsys-view"
@@ -111,7 +117,7 @@ def check_animate(path: str | os.PathLike, fps: float | None = None) -> None:
                          "or as an .html file (3-D view of any model)")
 
 
-def write_animate(model, result, path: str | os.PathLike, fps: float | None = None,
+def write_animate(model: MechanicalModel, result: SimulationResult, path: str | os.PathLike, fps: float | None = None,
                   source: str | os.PathLike | None = None, max_frames: int = MAX_FRAMES) -> int:
     """Write ``simulate --animate``'s file, chosen by its suffix; returns the number of frames."""
     if is_html(path):
@@ -135,7 +141,7 @@ def _value(doc, value, path: tuple) -> float:
     return float(x)
 
 
-def solid_of(doc, name: str, index: int) -> Solid | None:
+def solid_of(doc: Document, name: str, index: int) -> Solid | None:
     """The drawn body of a link: its shape, a particle, or None (drawn as segments only)."""
     spec = doc.spec.links[name]
     path = ("links", name)
@@ -156,7 +162,7 @@ def solid_of(doc, name: str, index: int) -> Solid | None:
     return Solid(name, index, kind, centre, axis, size)
 
 
-def up_direction(doc) -> np.ndarray:
+def up_direction(doc: Document) -> np.ndarray:
     """The unit vector against the (first, constant) gravity of the model; ground z when there is none."""
     values = {sym: sp.Float(doc.parameter_values[n]) for n, sym in doc.parameters.items()}
     for i, force in enumerate(doc.spec.forces):
@@ -171,7 +177,7 @@ def up_direction(doc) -> np.ndarray:
     return np.array([0.0, 0.0, 1.0])
 
 
-def scene(model) -> Scene:
+def scene(model: MechanicalModel) -> Scene:
     """The symbolic scene of a model: sketch points, link frames and drawn bodies."""
     links = list(model.doc.spec.links)
     frames = [model.kin.frames[n] for n in links]
@@ -184,7 +190,7 @@ def scene(model) -> Scene:
     return Scene(geo, links, origins, rotations, solids, up_direction(model.doc))
 
 
-def evaluate_scene(model, sc: Scene, t: np.ndarray, q: np.ndarray, u: np.ndarray) -> Motion:
+def evaluate_scene(model: MechanicalModel, sc: Scene, t: np.ndarray, q: np.ndarray, u: np.ndarray) -> Motion:
     """Points, frame origins and rotations at the given states (one compiled function for all of them)."""
     from mechsys.numeric.parameters import parameter_values
     from mechsys.numeric.lambdify import compile_matrix
@@ -524,7 +530,7 @@ def write_page(path: str | os.PathLike, sc: Scene, motion: Motion, title: str, f
     write_text_atomic(path, page(figure(sc, motion, title, fps), title))
 
 
-def write_run_view(model, result, path: str | os.PathLike, fps: float | None = None,
+def write_run_view(model: MechanicalModel, result: SimulationResult, path: str | os.PathLike, fps: float | None = None,
                    max_frames: int = MAX_FRAMES) -> int:
     """The 3-D animation of a run (at most ``max_frames`` evenly spread output rows, first and last included),
     written atomically; returns the number of frames."""
@@ -539,7 +545,7 @@ def write_run_view(model, result, path: str | os.PathLike, fps: float | None = N
     return len(t)
 
 
-def initial_configuration(model) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def initial_configuration(model: MechanicalModel) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(t, q, u) of the file's initial state, as `simulate` starts it: assembled onto the holonomic constraints
     (loop closures) when there are any, as the file gives it otherwise."""
     from mechsys.analysis.motion.simulate import check_on_manifold, file_state, initial_state
@@ -553,7 +559,7 @@ def initial_configuration(model) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return np.zeros(1), q0[None, :], u0[None, :]
 
 
-def write_initial_view(model, path: str | os.PathLike) -> None:
+def write_initial_view(model: MechanicalModel, path: str | os.PathLike) -> None:
     """`mechsys view`: the initial configuration as a one-frame 3-D view, written atomically."""
     check_html_path(path, "--output")
     sc = scene(model)

@@ -16,9 +16,12 @@ from __future__ import annotations
 import hashlib
 import json
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from mechsys.numeric import cache
+
+if TYPE_CHECKING:
+    from mechsys.analysis.facts import Info
 
 _SOURCE: list[str] = []
 
@@ -89,7 +92,7 @@ def store_files(key: str | None, files: dict[str, str]) -> None:
         cache.store(key, {"files": dict(files)})
 
 
-def load_info(key: str | None):
+def load_info(key: str | None) -> Info | None:
     """Kept `info` facts (an Info), or None when missing or not of Info's shape."""
     entry = cache.load(key) if key is not None else None
     facts = entry.get("info") if entry is not None else None
@@ -167,7 +170,7 @@ def load_tables(key: str | None) -> tuple[list, Any] | None:
     return tables, entry.get("payload")
 
 
-def store_info(key: str | None, info) -> None:
+def store_info(key: str | None, info: Info) -> None:
     """Keep the facts, when they are plain JSON data that reads back to the same Info."""
     if key is None:
         return

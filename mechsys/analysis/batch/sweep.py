@@ -25,11 +25,16 @@ from collections import OrderedDict
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
-from typing import Any, Callable, Iterable
+from typing import TYPE_CHECKING, Any, Callable, Iterable
 
 import numpy as np
 
 from mechsys.errors import InputError, MechsysError
+
+if TYPE_CHECKING:
+    from dask.distributed import Client, LocalCluster
+
+    from mechsys.mechanics.model import MechanicalModel
 
 EXECUTORS = ("processes", "dask")
 FIXED_TAIL = ("status", "error", "seconds")
@@ -153,14 +158,14 @@ def parse_options(items: Iterable[str] | None, analysis: str) -> dict:
     return out
 
 
-def sweepable_names(model) -> list[str]:
+def sweepable_names(model: MechanicalModel) -> list[str]:
     """Names a sweep may vary: parameters, free coordinates (initial value) and der(free coordinate)."""
     doc = model.doc
     free = [n for n, c in doc.spec.coordinates.items() if c.prescribed is None]
     return list(doc.parameters) + free + [f"der({n})" for n in free]
 
 
-def check_names(model, axes: list[Axis]) -> None:
+def check_names(model: MechanicalModel, axes: list[Axis]) -> None:
     names = sweepable_names(model)
     for a in axes:
         if a.name not in names:
@@ -536,7 +541,7 @@ class Resume:
     others: list[dict]  # old rows of tasks not in this sweep (kept at the end)
 
 
-def load_resume(path: Path | None, names: list[str], model) -> Resume:
+def load_resume(path: Path | None, names: list[str], model: MechanicalModel) -> Resume:
     if path is None or not path.exists():
         return Resume({}, [])
     columns, rows = read_table(path)
@@ -627,7 +632,7 @@ def _ignore_interrupts() -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
-def dask_client(scheduler: str | None, jobs: int):
+def dask_client(scheduler: str | None, jobs: int) -> tuple[Client, LocalCluster | None, int]:
     """(client, cluster or None, workers). Dask is imported here only (an optional dependency)."""
     try:
         import logging
@@ -671,7 +676,7 @@ def dask_client(scheduler: str | None, jobs: int):
     return Client(cluster), cluster, jobs
 
 
-def run_dask(spec: SweepSpec, chunks: list, client, on_chunk: Callable[[list[dict]], None]) -> None:
+def run_dask(spec: SweepSpec, chunks: list, client: Client, on_chunk: Callable[[list[dict]], None]) -> None:
     from dask.distributed import as_completed
 
     keys = [_chunk_key(spec, chunk) for chunk in chunks]

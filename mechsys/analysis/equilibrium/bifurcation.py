@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass, field
-from typing import Callable
+from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 import sympy as sp
@@ -17,6 +17,10 @@ from mechsys.mechanics.model import MechanicalModel
 from mechsys.numeric.lambdify import compile_exprs
 from mechsys.numeric.parallel import fork_map
 from mechsys.numeric.parameters import parameter_values
+
+if TYPE_CHECKING:
+    from mechsys.analysis.equilibrium.continuation import Compiled
+    from mechsys.analysis.equilibrium.equilibria import SteadyOptions
 
 
 @dataclass
@@ -211,7 +215,7 @@ class SweptSystem:
         except AnalysisError as exc:  # e.g. a singular saddle-point system: the branch ends here, with the reason
             raise Undefined(str(exc)) from None
 
-    def compiled(self, starts: list[tuple[np.ndarray, float]]):
+    def compiled(self, starts: list[tuple[np.ndarray, float]]) -> Compiled | None:
         """The continuation's compiled corrector for F, Fx and Fp (a factory, see continuation.Compiled), where the
         problem has one and the swept p moves its arguments affinely; None otherwise (the Python loop)."""
         make = getattr(self.problem, "compiled_corrector", None)
@@ -223,7 +227,8 @@ class SweptSystem:
 
 
 def sweep(model: MechanicalModel, name: str, start: float, stop: float, points: int = 101,
-          search: dict | None = None, options=None, problem: EquilibriumProblem | None = None) -> SweepResult:
+          search: dict | None = None, options: SteadyOptions | None = None,
+          problem: EquilibriumProblem | None = None) -> SweepResult:
     """Follow every equilibrium branch found at the ends and the middle of [start, stop] by pseudo-arclength
     continuation; stability from the eigenvalues; folds, branch points, Hopf points and eigenvalue collisions on
     the imaginary axis located on the way. NAME is a parameter or der(NAME) of a family of steady motions.

@@ -6,6 +6,7 @@ import copy
 import itertools
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -15,6 +16,9 @@ from mechsys.numeric import cache
 from mechsys.numeric.lambdify import compile_exprs, generate_source
 from mechsys.numeric.runtime import function_from_source
 from mechsys.numeric.rotations import alternatives, angles_of, canonical, rate_matrix, ratio, rotation
+
+if TYPE_CHECKING:
+    from mechsys.mechanics.model import MechanicalModel
 
 #: The chart is singular where the smallest singular value of the joint's map (angle rates -> angular velocity),
 #: relative to the largest, is below this.
@@ -37,7 +41,7 @@ class Singularity:
                 f"parallel)")
 
 
-def rotation_joints(model) -> list[tuple]:
+def rotation_joints(model: MechanicalModel) -> list[tuple]:
     """(joint info, angle coordinates, sequence) for every joint with two or more free angle coordinates."""
     out = []
     for j in model.kin.joints:
@@ -60,7 +64,7 @@ def _rate_map(model, link: str, names: list[str]):
     return memo[key]
 
 
-def singularities(model, coordinates: dict[str, float], p: np.ndarray) -> list[Singularity]:
+def singularities(model: MechanicalModel, coordinates: dict[str, float], p: np.ndarray) -> list[Singularity]:
     """The rotation joints whose angles are singular at this configuration (cyclic coordinates absent: at 0)."""
     q = [coordinates.get(c, 0.0) for c in model.coordinates]
     found = []

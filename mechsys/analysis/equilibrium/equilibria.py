@@ -18,6 +18,8 @@ from mechsys.numeric.runtime import function_from_source
 from mechsys.numeric.parameters import parameter_values
 
 if TYPE_CHECKING:
+    import pandas as pd
+
     from mechsys.analysis.equilibrium.exhaustive import Exhaustive
 
 
@@ -72,7 +74,7 @@ class EquilibriaResult:
 
         return equilibria_markdown(self)
 
-    def to_dataframe(self):
+    def to_dataframe(self) -> pd.DataFrame:
         """One row per equilibrium or steady motion: coordinates, der(rates), stability, critical, reason,
         max_real and the eigenvalues (needs pandas: ``pip install 'mechsys[notebook]'``)."""
         from mechsys.report.notebook import equilibria_frame

@@ -4,7 +4,7 @@ from __future__ import annotations
 from contextlib import contextmanager
 from dataclasses import dataclass
 from functools import cached_property
-from typing import Iterator
+from typing import TYPE_CHECKING, Iterator
 
 import numpy as np
 import sympy as sp
@@ -13,6 +13,9 @@ from mechsys.mechanics.dag import Substitution
 from mechsys.mechanics.model import INTERNAL_METHOD, MechanicalModel
 from mechsys.numeric import cache
 from mechsys.numeric.runtime import check_source, function_from_code, rows_function_from_code
+
+if TYPE_CHECKING:
+    from mechsys.analysis.equilibrium.equilibria import Equilibrium
 
 
 class LinearPieces:
@@ -206,7 +209,7 @@ def state_at(model: MechanicalModel, coordinates: dict[str, float], rates: dict[
     return q, u
 
 
-def linearize(model: MechanicalModel, equilibrium, p: np.ndarray | None = None) -> Linearization:
+def linearize(model: MechanicalModel, equilibrium: Equilibrium, p: np.ndarray | None = None) -> Linearization:
     """Linearize about an equilibrium (or steady motion): K + N = -d(f + A^T lambda)/dq, C + G = -df/du,
     split into symmetric and skew-symmetric parts."""
     from mechsys.numeric.parameters import parameter_values

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 import scipy.linalg as sla
@@ -11,6 +12,11 @@ from mechsys.numeric.parameters import parameter_values
 from mechsys.analysis.equilibrium.linearize import Linearization, linearize
 from mechsys.errors import AnalysisError, InputError
 from mechsys.mechanics.model import MechanicalModel
+
+if TYPE_CHECKING:
+    import pandas as pd
+
+    from mechsys.analysis.equilibrium.equilibria import SteadyOptions
 
 #: omega^2 below RIGID * max(omega^2) (or absolutely tiny) marks a rigid-body (zero-frequency) mode.
 RIGID = 1e-9
@@ -54,7 +60,7 @@ class Modes:
 
         return modes_markdown(self)
 
-    def to_dataframe(self):
+    def to_dataframe(self) -> pd.DataFrame:
         """One row per mode: frequency [rad/s], frequency [Hz], damping ratio, rigid body (needs pandas:
         ``pip install 'mechsys[notebook]'``)."""
         from mechsys.report.notebook import modes_frame
@@ -172,7 +178,8 @@ def reduce(model: MechanicalModel, lin: Linearization) -> tuple[ReducedSystem, l
     return ReducedSystem(M, C, K, base, names), condensed
 
 
-def vibration_modes(model: MechanicalModel, at: dict[str, float] | None = None, options=None) -> Modes:
+def vibration_modes(model: MechanicalModel, at: dict[str, float] | None = None,
+                    options: SteadyOptions | None = None) -> Modes:
     """Modes about ``at`` (polished to an exact equilibrium) or about the first stable equilibrium found (else the
     first found, with a note: Modes.note)."""
     if not model.is_holonomic:
@@ -217,7 +224,8 @@ def vibration_modes(model: MechanicalModel, at: dict[str, float] | None = None, 
     return Modes(names, e, freqs, shapes, rigid, zeta, vals, condensed, unstable, red, note)
 
 
-def steady_modes(model: MechanicalModel, at: dict[str, float] | None = None, options=None) -> Modes:
+def steady_modes(model: MechanicalModel, at: dict[str, float] | None = None,
+                 options: SteadyOptions | None = None) -> Modes:
     """Modes of a nonholonomic steady motion (analysis/equilibrium/nonholonomic.py): one per eigenvalue of the reduced
     linearization with Im >= 0 (structural zeros apart), natural frequency |lambda|, damping ratio -Re/|lambda|
     (real roots: +-1), shapes on the independent shape coordinates (the eigenvector turned so that its largest

@@ -25,6 +25,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import sympy as sp
@@ -37,6 +38,9 @@ from mechsys.mechanics.model import MechanicalModel
 from mechsys.numeric import native, tangents
 from mechsys.numeric.lambdify import (ForwardProgram, compile_exprs, differentiate_program, function_from_source,
                                        generate_source, shared_program, value_and_jacobian_sources)
+
+if TYPE_CHECKING:
+    from mechsys.analysis.equilibrium.continuation import Compiled
 
 #: relative size below which a column, a singular value or a shift difference counts as zero
 ZERO = 1e-9
@@ -148,14 +152,15 @@ class ConstrainedPieces:
         return {"size": self.size, "c": c_source, **python, "autonomous": model.is_autonomous(method),
                 "read": [s in used for s in model.parameter_symbols]}
 
-    def residual(self, q, u, a, lam, p) -> np.ndarray:
+    def residual(self, q: np.ndarray, u: np.ndarray, a: np.ndarray, lam: np.ndarray, p: np.ndarray) -> np.ndarray:
         """E alone (no derivatives): what a line search evaluates."""
         if self._native is not None:
             return self._native("mechsys_values", np.concatenate([q, u, a, lam, p]))
         with np.errstate(all="ignore"):
             return np.asarray(self._values(*q, *u, *a, *lam, *p), dtype=float)
 
-    def evaluate(self, q, u, a, lam, p) -> dict[str, np.ndarray]:
+    def evaluate(self, q: np.ndarray, u: np.ndarray, a: np.ndarray, lam: np.ndarray,
+                 p: np.ndarray) -> dict[str, np.ndarray]:
         """E, M, A, dE/dq and dE/du (the last point's are kept: a Jacobian and dF/dp at one point share them)."""
         args = np.concatenate([q, u, a, lam, p]).astype(float)
         tag = args.tobytes()
@@ -176,7 +181,7 @@ class ConstrainedPieces:
         self._last = (tag, v)
         return v
 
-    def accelerations(self, q, u, p) -> tuple[np.ndarray, np.ndarray]:
+    def accelerations(self, q: np.ndarray, u: np.ndarray, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """a and lambda of the saddle-point system M a - A^T lambda = f, A a = b."""
         n, m = self.n, self.m
         v = self.evaluate(q, u, np.zeros(n), np.zeros(m), p)
@@ -498,7 +503,7 @@ class NonholonomicProblem(EquilibriumProblem):
         lib = native.newton_library() if program is not None else None
         return None if lib is None else (program, lib)
 
-    def compiled_newton(self, p: np.ndarray):
+    def compiled_newton(self, p: np.ndarray) -> native.CompiledNewton | None:
         """The multistart's deflated Newton as compiled code over the pieces' program (numeric/newton.c) at the
         parameters p and the current given values and rates; None without the compiled pieces or a compiler."""
         if self._compiled is None:
@@ -518,7 +523,7 @@ class NonholonomicProblem(EquilibriumProblem):
         return last[1]
 
     def compiled_corrector(self, p_ref: float, P: np.ndarray, dP: np.ndarray, drates: np.ndarray, D: np.ndarray,
-                           rows: list[int] | slice):
+                           rows: list[int] | slice) -> Compiled | None:
         """The continuation's corrector as compiled code (numeric/newton.c) for a sweep's F(x, p) = E(D x)[rows]
         whose parameters P and given rates move affinely with p (slopes dP and drates, fixed_rates order; the given
         rates now are those at p_ref): a factory (s, r, tol) -> corrector (continuation.Compiled); None without

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
 import scipy.linalg as sla
@@ -10,13 +11,16 @@ import sympy as sp
 from mechsys.analysis.equilibrium.linearize import pieces, state_at
 from mechsys.numeric.lambdify import compile_exprs
 
+if TYPE_CHECKING:
+    from mechsys.analysis.equilibrium.equilibria import Equilibrium, EquilibriumProblem
+
 #: Real parts with |Re| <= ZERO_RE * max(1, max |eigenvalue|) count as zero (critical case).
 ZERO_RE = 1e-9
 #: Hessian eigenvalues with |h| <= ZERO_H * max(1, max |h|) count as zero (degenerate minimum).
 ZERO_H = 1e-9
 
 
-def reduced_pencil(problem, e) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+def reduced_pencil(problem: EquilibriumProblem, e: Equilibrium) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
     """(A, B) with B x' = A x for the reduced linearized state, and N (tangent basis) for constrained systems.
 
     Unconstrained: state (non-cyclic q, all rates). Constrained: state (eta, eta') with q = q0 + N eta.
@@ -44,7 +48,7 @@ def reduced_pencil(problem, e) -> tuple[np.ndarray, np.ndarray, np.ndarray | Non
     return A, B, None
 
 
-def problem_parameters(problem) -> np.ndarray:
+def problem_parameters(problem: EquilibriumProblem) -> np.ndarray:
     p = getattr(problem, "current_parameters", None)
     if p is None:
         from mechsys.numeric.parameters import parameter_values
@@ -53,7 +57,7 @@ def problem_parameters(problem) -> np.ndarray:
     return p
 
 
-def pencil_eigenvalues(problem, e) -> np.ndarray:
+def pencil_eigenvalues(problem: EquilibriumProblem, e: Equilibrium) -> np.ndarray:
     """The finite eigenvalues of reduced_pencil(problem, e), sorted; a problem that has them already (the
     nonholonomic linearization computes those of its deflated Jacobian) gives them without a second eigensolve."""
     if hasattr(problem, "pencil_eigenvalues"):
@@ -91,7 +95,7 @@ def singular_pencil(A: np.ndarray, B: np.ndarray) -> bool:
     return True
 
 
-def massless_coordinates(problem, e) -> list[str]:
+def massless_coordinates(problem: EquilibriumProblem, e: Equilibrium) -> list[str]:
     """Coordinates whose row of the mass matrix vanishes at the equilibrium (no mass or inertia moves with them)."""
     model = problem.model
     q, u = state_at(model, e.coordinates, e.rates)
@@ -125,7 +129,7 @@ def _massive_elsewhere(problem, names: list[str], p: np.ndarray) -> bool:
 AHEAD_FROM = 32
 
 
-def assess_all(problem, equilibria: list, p: np.ndarray) -> None:
+def assess_all(problem: EquilibriumProblem, equilibria: list, p: np.ndarray) -> None:
     """assess() each equilibrium; from AHEAD_FROM of them on, their linearizations evaluated in one pass first
     (LinearPieces.evaluated_ahead: the same values, computed together)."""
     if hasattr(problem, "assess") or hasattr(problem, "pencil") or len(equilibria) < AHEAD_FROM:
@@ -139,7 +143,7 @@ def assess_all(problem, equilibria: list, p: np.ndarray) -> None:
             assess(problem, e, p)
 
 
-def assess(problem, e, p: np.ndarray) -> None:
+def assess(problem: EquilibriumProblem, e: Equilibrium, p: np.ndarray) -> None:
     """Fill eigenvalues, Jacobian and verdict of equilibrium ``e`` in place."""
     if hasattr(problem, "assess"):
         return problem.assess(e, p)
@@ -217,7 +221,7 @@ def _conservative_linear(problem, e, p, vals, tol, stability, reason) -> tuple[s
 
 
 # ----------------------------------------------------------------------------------------- energy argument
-def energy_verdict(problem, e, p: np.ndarray, zero_count: int) -> tuple[str, str]:
+def energy_verdict(problem: EquilibriumProblem, e: Equilibrium, p: np.ndarray, zero_count: int) -> tuple[str, str]:
     """Critical case: with only dissipative (or no) non-conservative forces, a strict minimum of the effective
     potential (V - T0, amended by Routh for cyclic momenta) is stable (Lagrange-Dirichlet); no minimum with
     complete damping is unstable (Kelvin-Tait-Chetaev). Otherwise undecided, with the reason."""

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import itertools
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 import sympy as sp
@@ -11,6 +12,9 @@ from mechsys.numeric.parameters import parameter_values
 from mechsys.errors import AnalysisError, InputError
 from mechsys.mechanics.model import MechanicalModel
 from mechsys.numeric.lambdify import compile_matrix
+
+if TYPE_CHECKING:
+    from mechsys.numeric.runtime import StateFunction
 
 
 @dataclass
@@ -88,7 +92,7 @@ class ImpactModel:
         self.vr_t = compile_matrix(vrel.xreplace({u: 0 for u in model.u}), *args)
         self._bodies = None
 
-    def bodies(self):
+    def bodies(self) -> list[tuple[str, StateFunction, StateFunction]]:
         """(name, mass function, centre-of-mass ground velocity function) of each massive link (compiled once)."""
         if self._bodies is None:
             m = self.model
@@ -306,7 +310,8 @@ def resolve(model: MechanicalModel, contact: str | None = None, q: np.ndarray | 
     return res
 
 
-def joint_impulses(model: MechanicalModel, q, u_before, u_after, U, p, t: float,
+def joint_impulses(model: MechanicalModel, q: np.ndarray, u_before: np.ndarray, u_after: np.ndarray, U: np.ndarray,
+                   p: np.ndarray, t: float,
                    tangential: np.ndarray | None = None) -> dict[str, list[float]]:
     """Impulse each joint applies to its child link (ground axes): the momentum change of the child's subtree
     minus the contact impulses (normal and friction) acting on that subtree (per-body Newton-Euler impulse

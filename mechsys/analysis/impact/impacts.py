@@ -1,7 +1,7 @@
 """Impacts inside a simulation: gap events, the impulse law, sequential impacts and the capture-velocity rest rule."""
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 
@@ -9,7 +9,9 @@ from mechsys.analysis.motion.events import solve_ivp  # events located inside st
 from mechsys.errors import AnalysisError
 
 if TYPE_CHECKING:
-    from mechsys.analysis.motion.simulate import Integration
+    from mechsys.analysis.impact.collide import ImpactResult
+    from mechsys.analysis.motion.simulate import Compiled, Integration, RightHandSide
+    from mechsys.mechanics.model import MechanicalModel
 
 
 def _pressed(rhs, t: float, q: np.ndarray, u: np.ndarray, trial: list[int]) -> list[int]:
@@ -45,7 +47,8 @@ def _lift_off_functions(rhs, c, p) -> list:
     return fns
 
 
-def contact_state(model, c, p, t: float, q: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def contact_state(model: MechanicalModel, c: Compiled, p: np.ndarray, t: float, q: np.ndarray,
+                  u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(gaps, normal velocities) of the gap contacts at (t, q, u); an AnalysisError naming the contact when its
     geometry is degenerate there (a zero radius: the gap's derivative divides by zero)."""
     from mechsys.analysis.impact.collide import contact_degeneracy
@@ -97,7 +100,8 @@ def _segment(job: Integration, t: float, y: np.ndarray, fns: list, lift_events: 
         return sol
 
 
-def integrate_with_impacts(job: Integration, y0: np.ndarray, capture_velocity: float):
+def integrate_with_impacts(job: Integration, y0: np.ndarray,
+                           capture_velocity: float) -> tuple[np.ndarray, np.ndarray, int | None, list[dict], bool]:
     """Segments between impacts: gap = 0 (closing) stops the integrator, the impulse law gives the velocities of
     separation, and integration restarts. Rest rule: an impact whose approach speed is below capture_velocity is
     plastic and its contact becomes persistent (a constraint row), so a bouncing ball ends in finitely many
@@ -257,7 +261,9 @@ def _record(model, t, name, res, u, u_new, captured, q, p, joint_impulses) -> di
             "joint_impulses": joints}
 
 
-def sequential_impacts(model, c, p, t, q, u, rhs, impacts, resolve) -> np.ndarray:
+def sequential_impacts(model: MechanicalModel, c: Compiled, p: np.ndarray, t: float, q: np.ndarray, u: np.ndarray,
+                       rhs: RightHandSide, impacts: list[dict],
+                       resolve: Callable[..., ImpactResult]) -> np.ndarray:
     """Touching contacts that approach after an impact collide at the same instant, one after another
     (Krodkiewski problem 55): repeat until no touching contact approaches."""
     for _ in range(1000):

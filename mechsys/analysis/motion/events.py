@@ -1,9 +1,12 @@
 """Event location inside integrator steps: sign changes and near-tangential touches found on the dense output."""
 from __future__ import annotations
 
-from typing import Callable, Sequence
+from typing import TYPE_CHECKING, Any, Callable, Sequence
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from scipy.optimize import OptimizeResult
 
 SAMPLES = 8  # sub-intervals of every step on which the event functions are sampled
 DIP_MARGIN = 4.0  # a sampled minimum of |g| is searched when it is below DIP_MARGIN x the local variation of g
@@ -141,8 +144,9 @@ def _not_finite_is_an_analysis_error(action: Callable, t: float):
                             "overflow: check the parameter values)") from None
 
 
-def solve_ivp(fun: Callable, t_span: Sequence[float], y0: np.ndarray, method: str = "DOP853", t_eval=None,
-              dense_output: bool = False, events: Sequence[Callable] | None = None, **options):
+def solve_ivp(fun: Callable, t_span: Sequence[float], y0: np.ndarray, method: str = "DOP853",
+              t_eval: np.ndarray | None = None, dense_output: bool = False, events: Sequence[Callable] | None = None,
+              **options: Any) -> OptimizeResult:
     """scipy's solve_ivp (the subset mechsys uses: forward in time, method by name), with events located inside
     every step by ``crossings`` instead of by the signs at step ends only, which steps over a crossing pair
     closer together than a step. The result also tells ``nsteps`` (steps taken) and ``h_next`` (the step size the

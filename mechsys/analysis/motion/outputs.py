@@ -1,7 +1,7 @@
 """The file's `outputs:` evaluated along a motion: one column per output (accelerations from the equations)."""
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Callable, Iterator, Sequence
 
 import numpy as np
 
@@ -43,7 +43,8 @@ def output_columns(model: MechanicalModel, result: SimulationResult, p: np.ndarr
     return {name: data[:, k] for k, (name, _e) in enumerate(model.outputs)}
 
 
-def compile_outputs(model: MechanicalModel):
+def compile_outputs(model: MechanicalModel) -> Callable[[float, np.ndarray, np.ndarray, np.ndarray, np.ndarray,
+                                                       Sequence[float]], list[float]]:
     """fn(t, q, u, q'', p, deferred) -> the outputs' values, in the order of ``model.outputs``; ``deferred``: the
     values of the multiplier and reaction placeholders (deferred_values)."""
     from mechsys.numeric.lambdify import compile_exprs
@@ -73,7 +74,8 @@ def deferred_values(model: MechanicalModel, t: float, q: np.ndarray, u: np.ndarr
             for kind, what, k in model.deferred_quantities.values()]
 
 
-def accelerations_along(model: MechanicalModel, result: SimulationResult, p: np.ndarray):
+def accelerations_along(model: MechanicalModel, result: SimulationResult,
+                        p: np.ndarray) -> Iterator[tuple[np.ndarray, np.ndarray]]:
     """(q'', multipliers) from the equations of motion at each output time of ``result``, the resting contacts
     of the run (captured impacts) held as in the run."""
     from mechsys.analysis.motion.simulate import RightHandSide, compile_model

@@ -12,7 +12,12 @@ from mechsys.errors import AnalysisError, InputError
 from mechsys.numeric.native import budget_spent
 
 if TYPE_CHECKING:  # sympy and the model are imported only where used: a warm run (motion/warm.py) needs neither
+    import pandas as pd
+    from scipy.optimize import OptimizeResult
+
+    from mechsys.analysis.motion.sundials import SundialsResult
     from mechsys.mechanics.model import MechanicalModel
+    from mechsys.numeric.native import NativeIntegrator
 
 METHODS = ("auto", "native", "CVODE", "RK45", "DOP853", "Radau", "BDF", "LSODA")
 EVALUATIONS_PER_STEP = 20  # the scipy and CVODE paths count the step budget in right-hand-side evaluations
@@ -260,7 +265,7 @@ class SimulationResult:
 
         return simulation_markdown(self)
 
-    def to_dataframe(self):
+    def to_dataframe(self) -> pd.DataFrame:
         """One row per output time, the columns of the result file (`mechsys simulate -o x.csv`): t, the
         coordinates, der(q), T, V, E, residual, ... (needs pandas: ``pip install 'mechsys[notebook]'``)."""
         from mechsys.report.notebook import simulation_frame
@@ -541,7 +546,7 @@ def stiffness(rhs: RightHandSide, t0: float, y0: np.ndarray, t_end: float) -> tu
 
 
 def choose_method(rhs: RightHandSide, t0: float, y0: np.ndarray, t_end: float,
-                  native_ok: bool = False, cvode_ok=lambda: False) -> tuple[str, str]:
+                  native_ok: bool = False, cvode_ok: Callable[[], bool] = lambda: False) -> tuple[str, str]:
     """auto's choice; ``cvode_ok()`` is asked only for a stiff scene (importing scikit-sundae costs ~0.4 s)."""
     radius, steps_needed = stiffness(rhs, t0, y0, t_end)
     if steps_needed > 5e4:
@@ -564,7 +569,7 @@ def cvode_usable(c: Compiled, required: bool) -> bool:
     return why is None
 
 
-def ivp_solver(chosen: str):
+def ivp_solver(chosen: str) -> Callable[..., OptimizeResult | SundialsResult]:
     """solve_ivp, or CVODE behind the same call signature (the subset simulate uses)."""
     if chosen != "CVODE":
         from mechsys.analysis.motion.events import solve_ivp  # events located inside steps, not only at step ends
@@ -577,7 +582,7 @@ def ivp_solver(chosen: str):
     return cvode
 
 
-def native_integrator(model: MechanicalModel, c: Compiled, required: bool):
+def native_integrator(model: MechanicalModel, c: Compiled, required: bool) -> NativeIntegrator | None:
     """The compiled DOP853 loop when this scene can use it (no contacts or events) and a C compiler is available;
     with ``required`` (--method native) a reason is raised instead of returning None."""
     from mechsys.numeric import native
@@ -598,8 +603,8 @@ def native_integrator(model: MechanicalModel, c: Compiled, required: bool):
     return c.native
 
 
-def native_projected(nat, c: Compiled, p: np.ndarray, grid: np.ndarray, y0: np.ndarray, rtol: float, atol: float,
-                      progress, max_steps: float) -> tuple:
+def native_projected(nat: NativeIntegrator, c: Compiled, p: np.ndarray, grid: np.ndarray, y0: np.ndarray, rtol: float,
+                     atol: float, progress: Callable[[float], None] | None, max_steps: float) -> tuple:
     """Closed loops and drives on the compiled loop: native solves with dense output between projections onto the
     constraints. A solve spans as many output intervals as about PROJECTION_STEPS steps of the size reached cover
     (at least one), so the step is set by the tolerance, not by the output grid (one solve per output interval
@@ -780,7 +785,8 @@ def _plain_scipy(job: Integration, y0: np.ndarray) -> tuple:
 
 def simulate(model: MechanicalModel, t_end: float, dt: float | None = None, method: str = "auto",
              rtol: float = 1e-10, atol: float = 1e-12, overrides_p: np.ndarray | None = None,
-             capture_velocity: float = 1e-10, progress=None, max_steps: float = 1e6) -> SimulationResult:
+             capture_velocity: float = 1e-10, progress: Callable[[float], None] | None = None,
+             max_steps: float = 1e6) -> SimulationResult:
     """Integrate from the file's initial state to t_end; outputs every dt (default t_end/1000): ``integrate`` with
     the options by name (SimulationOptions tells what each does)."""
     return integrate(model, SimulationOptions(t_end, dt, method, rtol, atol, capture_velocity, max_steps),

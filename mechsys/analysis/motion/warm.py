@@ -16,12 +16,15 @@ import hashlib
 import json
 import time
 from pathlib import Path
-from typing import Callable, Optional, Sequence
+from typing import TYPE_CHECKING, Callable, Optional, Sequence
 
 import numpy as np
 
 from mechsys.analysis.motion.simulate import SimulationOptions, SimulationResult
 from mechsys.numeric import cache
+
+if TYPE_CHECKING:
+    from mechsys.mechanics.model import MechanicalModel
 
 STIFF_STEPS = 5e4  # the same threshold as simulate.choose_method
 
@@ -130,7 +133,7 @@ def run_planned(path: Path, overrides: Sequence[str], options: SimulationOptions
     return out
 
 
-def remember(path: Path, overrides: Sequence[str], model, result: SimulationResult) -> None:
+def remember(path: Path, overrides: Sequence[str], model: MechanicalModel, result: SimulationResult) -> None:
     """Store the plan of a native run so the next identical run starts warm (no-op for other methods)."""
     key = plan_key(path, overrides)
     drives = any(con.name.startswith("drive(") for con in model.kin.constraints)  # need the multipliers
