@@ -1,0 +1,1 @@
+"""Analyses of a MechanicalModel, grouped by the question they answer: equilibrium, motion, impact, batch."""

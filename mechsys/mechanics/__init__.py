@@ -1,0 +1,1 @@
+"""Mechanics: link frames, bodies, loads and constraint rows built from a Document; the equations of motion."""

@@ -1,0 +1,1 @@
+"""The model language: YAML with positions, the schema, the whitelist expression parser, the loaded Document."""

@@ -20,7 +20,7 @@ class Table:
     rows: list[list] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
 
-    def add(self, *cells) -> None:
+    def add(self, *cells: object) -> None:
         self.rows.append(list(cells))
 
 
