@@ -9,7 +9,8 @@ import sympy as sp
 
 import mechsys
 from helpers import SYSTEMS_DIR
-from mechsys.mechanics.differentiate import _CANONICAL, QUICK, VERIFIED, Differentiator, _compare
+from mechsys.mechanics.differentiate import QUICK, VERIFIED, Differentiator
+from mechsys.mechanics.order import OWN, canonical_key, compare
 
 
 def _same(a, b) -> bool:
@@ -219,10 +220,10 @@ def test_the_canonical_order_is_sympys_compare():
             sp.Tuple(_x, _y), sp.Tuple(_x, _y, _z), sp.Derivative(f(_x), _x), _Bag(_x, _y), _Bag(_x, _z), _Bag(_y)]
     for a in pool:
         for b in pool:
-            assert _compare(a, b) == sp.Basic.compare(a, b), (a, b)
+            assert compare(a, b) == sp.Basic.compare(a, b), (a, b)
     rng = random.Random(5)
     for _ in range(300):
         terms = [rng.choice(pool[:-8]) * rng.choice(pool[:-8]) + rng.choice(pool[:-8]) for _ in range(6)]
-        assert sorted(terms, key=_CANONICAL) == sorted(terms, key=sp.core.basic._args_sortkey)
-        assert [sp.srepr(t) for t in sorted(terms, key=_CANONICAL)] == [
+        assert sorted(terms, key=canonical_key) == sorted(terms, key=sp.core.basic._args_sortkey)
+        assert [sp.srepr(t) for t in sorted(terms, key=canonical_key)] == [
             sp.srepr(t) for t in sorted(terms, key=sp.core.basic._args_sortkey)]

@@ -11,26 +11,25 @@ other kinds are differentiated by sympy itself.
 Most of the time left is sympy's constructors (Mul.flatten and Add.flatten on the Leibniz terms and their sums),
 so the products and sums are built directly where flatten provably would only multiply rational numbers and sort:
 see `_quick_product` and `_quick_sum`; sympy's constructor builds every other case. Their sorting is sympy's
-canonical order, compared by `_compare` (Basic.compare with less overhead). They follow sympy's private helpers
-and its flatten rules as of the versions in VERIFIED (tests/test_differentiate.py compares them with sympy's
-constructors and Basic.compare); on any other sympy its constructors build everything, as before."""
+canonical order (mechanics/order.py). They follow sympy's private helpers and its flatten rules as of the
+versions in order.VERIFIED (tests/test_differentiate.py compares them with sympy's constructors); on any other
+sympy its constructors build everything, as before."""
 from __future__ import annotations
 
-from functools import cache, cmp_to_key
+from functools import cache
 
 import sympy as sp
 from sympy.core.function import ArgumentIndexError, Function
 from sympy.core.parameters import global_parameters
 
 from mechsys.mechanics.dag import FreeSymbols
+from mechsys.mechanics.order import VERIFIED, canonical_key
 
-#: sympy versions (major.minor) whose Mul.flatten, Add.flatten and Basic.compare the quick paths were checked against
-VERIFIED = ("1.14",)
 try:
     from sympy.calculus.accumulationbounds import AccumBounds
-    from sympy.core.basic import _cmp_name, _get_postprocessors
+    from sympy.core.basic import _get_postprocessors
 
-    QUICK = ".".join(sp.__version__.split(".")[:2]) in VERIFIED
+    QUICK = ".".join(sp.__version__.split(".")[:2]) in VERIFIED  # the direct sums and products
 except ImportError:  # pragma: no cover - another sympy layout: its constructors only
     QUICK = False
 
@@ -147,7 +146,7 @@ class Differentiator:
         if (coeff is _ZERO or not _quiet(type(coeff))
                 or len(rest) < 2 and (coeff is _ONE or not rest or rest[0].is_Add)):
             return None
-        rest.sort(key=_CANONICAL)  # Mul.flatten's _mulsort
+        rest.sort(key=canonical_key)  # Mul.flatten's _mulsort
         return sp.Mul._from_args(rest if coeff is _ONE else [coeff, *rest], True)
 
     def _quick_sum(self, terms: list[sp.Expr]) -> sp.Expr | None:
@@ -191,7 +190,7 @@ class Differentiator:
                 return None
             alike.add(key)
             out.append(o)
-        out.sort(key=_CANONICAL)  # Add.flatten's _addsort
+        out.sort(key=canonical_key)  # Add.flatten's _addsort
         return sp.Add._from_args(out, True)
 
     def _base(self, factor: sp.Expr) -> sp.Basic | None:
@@ -231,41 +230,3 @@ def _quiet(kind: type) -> bool:
     """No constructor postprocessor of Mul or Add runs for an argument of this type (sympy keeps them per type,
     cached the same way; matrix and tensor expressions have some)."""
     return not _get_postprocessors("Mul", kind) and not _get_postprocessors("Add", kind)
-
-
-_BASIC_COMPARE = sp.Basic.compare
-_NAME_ORDER: dict[tuple[type, type], int] = {}  # _cmp_name of two classes, remembered
-
-
-def _compare(a: sp.Basic, b: sp.Basic) -> int:
-    """Basic.compare(a, b), sympy's canonical order of the arguments of a sum or product, step for step, with the
-    order of two class names remembered (sympy searches its list of class names at every node compared: a third
-    of the sorting of a long chain's sums) and no call for an argument shared by a and b. Arguments of a class
-    with its own compare are compared by it, as in sympy."""
-    if a is b:
-        return 0
-    ka, kb = a.__class__, b.__class__
-    if ka is not kb:
-        c = _NAME_ORDER.get((ka, kb))
-        if c is None:
-            c = _NAME_ORDER[(ka, kb)] = _cmp_name(ka, kb)
-        if c:
-            return c
-    st, ot = a._hashable_content(), b._hashable_content()
-    if len(st) != len(ot):
-        return 1 if len(st) > len(ot) else -1
-    for l, r in zip(st, ot):
-        if isinstance(l, sp.Basic):
-            if l is r:
-                continue  # (compare of an object with itself is 0, its own compare's too)
-            c = _compare(l, r) if type(l).compare is _BASIC_COMPARE else l.compare(r)
-        elif isinstance(l, frozenset):
-            c = sp.Basic(*l).compare(sp.Basic(*r) if isinstance(r, frozenset) else r)
-        else:
-            c = (l > r) - (l < r)
-        if c:
-            return c
-    return 0
-
-
-_CANONICAL = cmp_to_key(_compare)  # sympy's _args_sortkey

@@ -7,10 +7,11 @@ matrix 6.8 s -> 3.2 s, its gravity forces 1.7 s -> 0.13 s. The entries are the o
 same Mul of the same factors and Add of the same terms), for the finite expressions a model is made of."""
 from __future__ import annotations
 
-from functools import cmp_to_key
 from operator import itemgetter
 
 import sympy as sp
+
+from mechsys.mechanics.order import canonical_key
 
 __all__ = ["product", "gram", "nonzero", "sums"]
 
@@ -75,7 +76,7 @@ class _Products:
             for f in sp.Mul.make_args(e):
                 factors.setdefault(f, None)
         plain = [f for f in factors if _plain(f)]
-        self.rank = {f: k for k, f in enumerate(sorted(plain, key=cmp_to_key(sp.Basic.compare)))}
+        self.rank = {f: k for k, f in enumerate(sorted(plain, key=canonical_key))}
 
     def __call__(self, a: sp.Expr, b: sp.Expr) -> sp.Expr:
         rank = self.rank
@@ -109,7 +110,7 @@ def sums(groups: list[list[sp.Expr]]) -> list[sp.Expr]:
     if sum(len(g) for g in groups) <= len(pool) + 1:  # nothing shared: Add's own sort costs no more
         return [sp.Add(*g) for g in groups]
     plain = [t for t in pool if _plain_term(t)]
-    rank = {t: k for k, t in enumerate(sorted(plain, key=cmp_to_key(sp.Basic.compare)))}
+    rank = {t: k for k, t in enumerate(sorted(plain, key=canonical_key))}
     return [_ranked_sum(g, rank) for g in groups]
 
 

@@ -8,10 +8,10 @@ from itertools import combinations, product
 from typing import TYPE_CHECKING, Callable, Iterator, TypeVar
 
 import sympy as sp
-from sympy.core.add import _addsort
-from sympy.core.mul import _keep_coeff, _mulsort
+from sympy.core.mul import _keep_coeff
 
 from mechsys.mechanics.model import Equations
+from mechsys.mechanics.order import canonical_key, compare
 
 if TYPE_CHECKING:
     from mechsys.mechanics.model import MechanicalModel
@@ -32,7 +32,7 @@ Value = TypeVar("Value")
 _TRIG = (sp.sin, sp.cos)
 _OTHER = {sp.sin: sp.cos, sp.cos: sp.sin}
 _UNDEFINED = (sp.zoo, sp.nan, sp.oo, -sp.oo)
-_BY_REST = cmp_to_key(lambda a, b: a[1].compare(b[1]))  # (coefficient, rest) pairs by rest, canonical order
+_BY_REST = cmp_to_key(lambda a, b: compare(a[1], b[1]))  # (coefficient, rest) pairs by rest, canonical order
 
 
 class OutOfTime(Exception):
@@ -311,7 +311,7 @@ def _divided(base: sp.Expr, split: list[tuple[sp.Expr, sp.Expr]], number: sp.Exp
         else:
             terms.append(_keep_coeff(q, rest))
     first = terms.pop(0) if terms[0].is_Number else None
-    _addsort(terms)
+    terms.sort(key=canonical_key)  # Add's order (sympy's _addsort)
     return base._new_rawargs(*([first] if first is not None else []), *terms)
 
 
@@ -358,7 +358,7 @@ def _product(coeff: sp.Expr, factors: list[sp.Expr]) -> sp.Expr | None:
         return None
     if len(rest) == 1 and (coeff == 1 or rest[0].is_Add):
         return None
-    _mulsort(rest)
+    rest.sort(key=canonical_key)  # Mul's order (sympy's _mulsort)
     return sp.Mul._from_args(rest if coeff == 1 else [coeff, *rest], True)
 
 
