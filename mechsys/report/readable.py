@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING, Callable, Iterator, TypeVar
 import sympy as sp
 from sympy.core.mul import _keep_coeff
 
+from mechsys.mechanics.construct import Constructors
 from mechsys.mechanics.model import Equations
 from mechsys.mechanics.order import canonical_key, compare
 
@@ -467,6 +468,7 @@ class _Cleaner:
         self.sizes: dict[sp.Basic, int] = {}
         self.products: dict[sp.Expr, sp.Expr] = {}
         self.factors: dict[sp.Expr, tuple | None] = {}  # tidy_signs's memo
+        self.build = Constructors()  # nodes rebuilt over cleaned args: directly where flatten would only sort
 
     def tick(self) -> None:
         self.work.spent += 1
@@ -483,7 +485,7 @@ class _Cleaner:
         """The node over its cleaned args, with the rules applied; the node as derived if that evaluated to an
         infinity or nan (a division by an expression that the identities make zero: keep what was derived)."""
         changed = args != node.args
-        new = node.func(*args) if changed else node
+        new = self._rebuilt(node, args) if changed else node
         redo = changed or not self.settled
         if new.is_Add:
             new = pythagoras(new) if redo else new
@@ -491,6 +493,13 @@ class _Cleaner:
         elif (new.is_Mul or new.is_Pow) and redo:
             new = tidy_signs(new, self.factors)
         return node if new.is_Atom and new in _UNDEFINED and node not in _UNDEFINED else new
+
+    def _rebuilt(self, node: sp.Basic, args: tuple) -> sp.Basic:
+        """node.func(*args)."""
+        kind = node.func
+        if kind is sp.Add:
+            return self.build.add(list(args))
+        return self.build.mul(list(args)) if kind is sp.Mul else kind(*args)
 
     def _expandable(self, factor: sp.Expr) -> int:
         """How many terms the factor contributes when multiplied out (1: it stays as it is)."""
