@@ -8,6 +8,7 @@ from typing import TYPE_CHECKING
 import sympy as sp
 
 from mechsys.mechanics.build import Body, Builder, Kinematics
+from mechsys.mechanics.construct import Constructors
 from mechsys.mechanics.dag import FreeSymbols, Interner
 from mechsys.mechanics.differentiate import Differentiator
 from mechsys.mechanics.kinematics import FrameState, rate_coefficients, time_derivative
@@ -83,7 +84,8 @@ class Sums:
                 self.terms[k].append(e)
 
     def matrix(self) -> sp.Matrix:
-        return sp.Matrix(*self.shape, [sp.Add(*t) for t in self.terms])
+        build = Constructors()  # directly where Add's flatten would only sort
+        return sp.Matrix(*self.shape, [build.add(t) for t in self.terms])
 
 
 class MechanicalModel:

@@ -11,6 +11,7 @@ from operator import itemgetter
 
 import sympy as sp
 
+from mechsys.mechanics.construct import Constructors
 from mechsys.mechanics.order import canonical_key
 
 __all__ = ["product", "gram", "nonzero", "sums"]
@@ -32,14 +33,15 @@ def product(A: sp.MatrixBase, B: sp.MatrixBase) -> sp.Matrix:
         raise ValueError(f"cannot multiply {A.shape} by {B.shape}")
     m, o = A.shape[0], B.shape[1]
     b_rows = _nonzero_rows(B)
+    build = Constructors()
     out = [[sp.S.Zero] * o for _ in range(m)]
     for i, a_row in enumerate(_nonzero_rows(A)):
         terms: dict[int, list] = {}
         for k, a in a_row.items():
             for j, b in b_rows[k].items():
-                terms.setdefault(j, []).append(a * b)
+                terms.setdefault(j, []).append(build.times(a, b))
         for j, t in terms.items():
-            out[i][j] = sp.Add(*t)
+            out[i][j] = build.add(t)
     return sp.Matrix(m, o, [e for row in out for e in row])
 
 
@@ -51,12 +53,13 @@ def gram(J: sp.MatrixBase, scale: sp.Expr = sp.S.One) -> sp.Matrix:
     cols = [{x: scaled[i][x] for x in range(rows) if nonzero(entries[i][x])} for i in range(n)]
     plain = [{x: entries[i][x] for x in cols[i]} for i in range(n)]
     times = _Products([a for c in cols for a in c.values()] + [b for c in plain for b in c.values()])
+    build = Constructors()
     out = [[sp.S.Zero] * n for _ in range(n)]
     for i in range(n):
         for j in range(i, n):
             t = [times(a, plain[j][x]) for x, a in cols[i].items() if x in plain[j]]
             if t:
-                out[i][j] = out[j][i] = sp.Add(*t)
+                out[i][j] = out[j][i] = build.add(t)
     return sp.Matrix(n, n, [e for row in out for e in row])
 
 
