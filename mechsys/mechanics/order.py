@@ -19,7 +19,7 @@ _BASIC_COMPARE = sp.Basic.compare
 _NAME_ORDER: dict[tuple[type, type], int] = {}  # _cmp_name of two classes, remembered
 
 
-def compare(a: sp.Basic, b: sp.Basic) -> int:
+def _stepwise(a: sp.Basic, b: sp.Basic) -> int:
     """Basic.compare(a, b), sympy's canonical order of the arguments of a sum or product, step for step, with the
     order of two class names remembered (sympy searches its list of class names at every node compared: a third
     of the sorting of a long chain's sums) and no call for an argument shared by a and b. Arguments of a class
@@ -40,7 +40,7 @@ def compare(a: sp.Basic, b: sp.Basic) -> int:
         if isinstance(l, sp.Basic):
             if l is r:
                 continue  # (compare of an object with itself is 0, its own compare's too)
-            c = compare(l, r) if type(l).compare is _BASIC_COMPARE else l.compare(r)
+            c = _stepwise(l, r) if type(l).compare is _BASIC_COMPARE else l.compare(r)
         elif isinstance(l, frozenset):
             c = sp.Basic(*l).compare(sp.Basic(*r) if isinstance(r, frozenset) else r)
         else:
@@ -50,5 +50,7 @@ def compare(a: sp.Basic, b: sp.Basic) -> int:
     return 0
 
 
-#: the sort key of Add's and Mul's arguments (sympy's _args_sortkey): `compare` where verified, else sympy's own
-canonical_key = cmp_to_key(compare if OWN else _BASIC_COMPARE)
+#: Basic.compare: step for step with less overhead where verified, else sympy's own
+compare = _stepwise if OWN else _BASIC_COMPARE
+#: the sort key of Add's and Mul's arguments (sympy's _args_sortkey)
+canonical_key = cmp_to_key(compare)
