@@ -106,20 +106,13 @@ def test_the_direct_paths_run_on_a_verified_sympy():
     assert d._quick_add(list(_SUMS["plain terms, sorted"])) is not None
 
 
-@pytest.mark.parametrize("name", _PRODUCTS)
-def test_direct_products_are_sympys_mul(name):
-    factors = _PRODUCTS[name]
-    assert _identical(Constructors().mul(list(factors)), sp.Mul(*factors)), name
-    with sp.evaluate(False):
-        assert _identical(Constructors().mul(list(factors)), sp.Mul(*factors)), name
-
-
-@pytest.mark.parametrize("name", _SUMS)
-def test_direct_sums_are_sympys_add(name):
-    terms = _SUMS[name]
-    assert _identical(Constructors().add(list(terms)), sp.Add(*terms)), name
-    with sp.evaluate(False):
-        assert _identical(Constructors().add(list(terms)), sp.Add(*terms)), name
+@pytest.mark.parametrize("kind, name", [("mul", n) for n in _PRODUCTS] + [("add", n) for n in _SUMS])
+def test_direct_products_and_sums_are_sympys(kind, name):
+    """Each boundary case of flatten's: the direct path's result is sympy's Mul or Add, also inside evaluate(False)."""
+    args, sympys = (_PRODUCTS[name], sp.Mul) if kind == "mul" else (_SUMS[name], sp.Add)
+    for evaluate in (True, False):
+        with sp.evaluate(evaluate):
+            assert _identical(getattr(Constructors(), kind)(list(args)), sympys(*args)), name
 
 
 class _Marked(sp.Symbol):
