@@ -502,7 +502,9 @@ def equilibria(
 def modes(
     file: Path = typer.Argument(..., help="Model file (YAML)."),
     at: Optional[List[str]] = typer.Option(None, "--at", metavar="NAME=VALUE",
-                                           help="Equilibrium to vibrate about (default: the first stable one)."),
+                                           help="Equilibrium to vibrate about (default: the stable rest the model "
+                                                "settles at from its initial configuration, else the first stable "
+                                                "one found)."),
     frf: Optional[str] = typer.Option(None, "--frf", metavar="START:STOP:N",
                                       help="Receptance over a frequency range [rad/s]."),
     frf_input: Optional[str] = typer.Option(None, "--input", help="FRF: coordinate the force acts on."),

@@ -109,7 +109,7 @@ def test_beam_two_springs_decouples_when_k1l1_equals_k2l2():
 def test_cart_pendulum_frequencies_and_mode_ratios():
     """E001-4 (2.55) with m1 = m2 = 1, R = 1, r = 0.1, k = 10, g = 9.81: M = [[m1+m2, m2 R], [m2 R, m2 R^2 + I]],
     K = diag(2k, m2 g R), I = 2/5 m2 r^2; w = 2.40720, 5.79571 rad/s; mode ratios phi/x = 1.45148 (in phase),
-    -1.40459 (anti-phase) [DERIVED]. Default 'at': the first stable equilibrium, (x, phi) = (0, 0)."""
+    -1.40459 (anti-phase) [DERIVED]. Default 'at': the stable rest it settles at, (x, phi) = (0, 0)."""
     model = load(SYSTEMS / "cart_pendulum.yaml", m1=1, m2=1, R=1, r=0.1, k=10, g=9.81)
     modes = vibration_modes(model)
     assert modes.coordinates == ["x", "phi"]
@@ -214,7 +214,7 @@ def test_winch_modes_condense_the_massless_gear():
 def test_two_mass_chain_modes_about_the_gravity_equilibrium():
     """E004-8: m1 = m2 = m, k1 = k2 = k: w^2 = (k/m)(3 -+ sqrt5)/2 = 0.381966 k/m and 2.618034 k/m, modes
     [1, 1.618034] (in phase) and [1, -0.618034] (anti-phase); E004-4: about the static equilibrium under gravity
-    the deflection cancels. Default 'at' = the first stable equilibrium (x1 = -2mg/k, x2 = -3mg/k)."""
+    the deflection cancels. Default 'at' = the stable rest it settles at (x1 = -2mg/k, x2 = -3mg/k)."""
     model = mechsys.load(DATA / "two_mass_chain.yaml")
     m, k = 1.0, 100.0
     for at in (None, {"x1": -2 * 9.81 / 100, "x2": -3 * 9.81 / 100}):

@@ -434,6 +434,44 @@ def _polish(problem: EquilibriumProblem, z: np.ndarray, p: np.ndarray) -> np.nda
     return z
 
 
+def settle(problem: EquilibriumProblem, z: np.ndarray, p: np.ndarray, max_steps: int = 400) -> np.ndarray | None:
+    """The rest the flow z' = F(z) comes to from z, polished (_polish), or None if it does not come to one.
+
+    Pseudo-transient continuation with switched evolution relaxation (Kelley and Keyes, SIAM J. Numer. Anal. 35,
+    1998): steps (I/delta - J) s = F, delta growing as |F| falls, so the first steps follow the flow and the last
+    ones are Newton's. The flow's rests that attract are those where J has no eigenvalue with a positive real
+    part; with F the generalized force at rest, F = -grad V for conservative forces and the flow descends the
+    potential to a minimum. Its verdict is still the caller's to assess: the steps may end on any root."""
+    F = problem.F(z, p)
+    J = problem.J(z, p)
+    if not (np.all(np.isfinite(F)) and np.all(np.isfinite(J))):
+        return None
+    eye = np.eye(len(z))
+    # the first step is explicit Euler's, inside its stability and at most 0.1 long (J vanishes where F peaks: a
+    # chain held horizontal)
+    delta = 0.1 / max(float(np.linalg.norm(J, np.inf)), float(np.linalg.norm(F, np.inf)), 1e-300)
+    for _ in range(max_steps):
+        try:
+            step = np.linalg.solve(eye / delta - J, F)
+        except np.linalg.LinAlgError:
+            delta *= 0.25
+            continue
+        trial = z + step
+        F_trial = problem.F(trial, p)
+        g, g_trial = float(np.linalg.norm(F)), float(np.linalg.norm(F_trial))
+        if not np.all(np.isfinite(F_trial)) or g_trial > 2.0 * g:
+            delta *= 0.25  # overshot: back towards the flow
+            continue
+        z, F = trial, F_trial
+        if np.linalg.norm(step, np.inf) < 1e-12 * (1 + np.linalg.norm(z, np.inf)):
+            break
+        delta = min(delta * min(g / max(g_trial, 1e-300), 10.0), 1e15)
+        J = problem.J(z, p)
+        if not np.all(np.isfinite(J)):
+            return None
+    return _polish(problem, problem.normalize(z), p)
+
+
 def _boxes(problem: EquilibriumProblem, search: dict[str, tuple[float, float]] | None) -> list[tuple[float, float]]:
     search = dict(search or {})
     model = problem.model

@@ -7,7 +7,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 import scipy.linalg as sla
 
-from mechsys.analysis.equilibrium.equilibria import Equilibrium, EquilibriumProblem, _polish, find_equilibria
+from mechsys.analysis.equilibrium.equilibria import (Equilibrium, EquilibriumProblem, _polish, find_equilibria,
+                                                      is_isolated, settle)
 from mechsys.numeric.parameters import parameter_values
 from mechsys.analysis.equilibrium.linearize import Linearization, linearize
 from mechsys.errors import AnalysisError, InputError
@@ -108,9 +109,35 @@ def _first_stable(res, candidates: list[Equilibrium], kind: str = "equilibrium")
                            f"found ({candidates[0].stability}); give another with --at")
 
 
+def _settled(model: MechanicalModel) -> Equilibrium | None:
+    """The stable equilibrium the model settles at from its initial configuration (equilibria.settle), or None:
+    the flow does not come to rest, or comes to a rest that is not isolated, at a gimbal lock of the chart or not
+    stable. Only where the unknowns are the coordinates alone (no cyclic coordinates, no closed loops)."""
+    from mechsys.analysis.equilibrium.charts import singularities
+    from mechsys.analysis.equilibrium.stability import assess
+
+    problem = EquilibriumProblem(model)
+    if problem.cyclic or problem.m or not problem.unknowns:
+        return None
+    p = parameter_values(model)
+    z = settle(problem, np.array([model.doc.initial.get(c, 0.0) for c in problem.free], dtype=float), p)
+    if z is None or not is_isolated(problem, z, p):
+        return None
+    e = problem.equilibrium(z)
+    if singularities(model, e.coordinates, p):
+        return None
+    assess(problem, e, p)
+    return e if e.stability in _STABLE else None
+
+
 def _equilibrium(model: MechanicalModel, at: dict[str, float] | None) -> tuple[Equilibrium, str]:
-    """The equilibrium to vibrate about and, when it is unstable for want of a stable one, a note saying so."""
+    """The equilibrium to vibrate about and, when it is unstable for want of a stable one, a note saying so:
+    the stable rest the model settles at from its initial configuration, else the first stable equilibrium of the
+    search."""
     if at is None:
+        settled = _settled(model)
+        if settled is not None:
+            return settled, ""
         res = find_equilibria(model)
         if not res.equilibria:
             raise AnalysisError("no equilibrium found to vibrate about; give one with --at")
