@@ -54,7 +54,7 @@ def test_3d_chain_of_boxes_vibrates_about_its_hanging_rest():
     multistart found (the same point, in 2.5 times the time)."""
     data = _modes_json(DATA / "beyond" / "chain3d_boxes.yaml")
     assert "note" not in data and data["unstable_modes"] == 0
-    assert all(abs(v) < 1e-9 for v in data["equilibrium"]["coordinates"].values())
+    assert all(v == 0.0 for v in data["equilibrium"]["coordinates"].values())  # not 1e-34: settle's snapping
     m, l, a, g = 0.5, 0.4, 0.05, 9.81
     expected = np.sort(np.concatenate([hanging_chain_frequencies(4, m, l, g, m * ((2 * a) ** 2 + l**2) / 12),
                                        hanging_chain_frequencies(4, m, l, g, m * (a**2 + l**2) / 12)]))
@@ -74,7 +74,7 @@ def test_planar_chain_held_horizontal_vibrates_about_its_hanging_rest(tmp_path):
     assert "note" not in data and data["unstable_modes"] == 0
     coords = data["equilibrium"]["coordinates"]
     assert coords["q1"] == pytest.approx(-math.pi / 2, abs=1e-12)
-    assert all(abs(coords[f"q{k}"]) < 1e-12 for k in range(2, n + 1))
+    assert all(coords[f"q{k}"] == 0.0 for k in range(2, n + 1))
     m, l, g = PARAMS["m"], PARAMS["l"], PARAMS["g"]
     expected = hanging_chain_frequencies(n, m, l, g, m * l**2 / 12)
     assert [mode["frequency_rad_s"] for mode in data["modes"]] == pytest.approx(expected, rel=1e-9)
@@ -85,7 +85,7 @@ def test_spring_chain_default_is_the_rest_it_starts_near():
     configuration with springs passed through zero length that sorted first (x1 = -0.512195, ...). The
     frequencies are those of M = diag(m), K tridiagonal (the file's header), here from the parameters."""
     data = _modes_json(ROOT / "systems" / "spring_chain.yaml")
-    assert all(abs(v) < 1e-12 for v in data["equilibrium"]["coordinates"].values())
+    assert all(v == 0.0 for v in data["equilibrium"]["coordinates"].values())
     m1, m2, m3, k1, k12, k23, k3 = 2.0, 1.5, 1.0, 2000.0, 1500.0, 1000.0, 800.0
     K = np.array([[k1 + k12, -k12, 0], [-k12, k12 + k23, -k23], [0, -k23, k23 + k3]])
     expected = np.sqrt(sla.eigh(K, np.diag([m1, m2, m3]), eigvals_only=True))
@@ -136,3 +136,22 @@ def test_winch_default_is_a_member_of_its_rigid_line():
     assert wrap(c["phi2"] - i * c["phi1"]) == pytest.approx(0.0, abs=1e-9)
     assert wrap(c["alpha1"] - c["phi1"]) == pytest.approx(0.0, abs=1e-9)
     assert [mode["rigid_body"] for mode in data["modes"]].count(True) == 1
+
+
+def test_eight_mode_shapes_print_in_blocks_with_every_number_whole(monkeypatch):
+    """The 3-D chain's mode shapes (8 x 8, numbers like -1.173315e-14) are wider than 80 columns: they print in
+    blocks of columns, each number whole on its line (rich folded them onto up to three lines before)."""
+    from mechsys.report.tables import fmt_number
+
+    monkeypatch.setenv("COLUMNS", "80")
+    path = DATA / "beyond" / "chain3d_boxes.yaml"
+    result = CliRunner().invoke(app, ["modes", str(path)])
+    assert result.exit_code == 0, result.output
+    lines = result.output.splitlines()
+    assert max(len(line) for line in lines) <= 80
+    cells = {c.strip() for line in lines if line.startswith("│") for c in line.split("│")[1:-1]}
+    data = _modes_json(path)
+    for mode in data["modes"]:
+        for value in mode["shape"].values():
+            assert fmt_number(value) in cells, fmt_number(value)
+    assert sum(line.startswith("┃ coordinate") for line in lines) == 2

@@ -260,9 +260,11 @@ def test_compiled_pieces_are_cached_and_the_python_path_remains(tmp_path, monkey
         assert np.allclose(again.residual(*state), python.residual(*state), rtol=1e-14, atol=1e-14)
 
 
-def test_a_narrow_terminal_folds_numbers_instead_of_cutting_them():
-    """rich cut -2.542378e-17 to '-2.542…' in an 80-column table of many columns: a silently wrong number.
-    Cells now fold onto a second line."""
+def test_a_narrow_terminal_neither_cuts_nor_folds_numbers():
+    """rich cut -2.542378e-17 to '-2.542…' in an 80-column table of many columns: a silently wrong number. Folded
+    onto two lines instead, '-2.542' could still be read as the number. The table is now printed in blocks of
+    columns that fit, each repeating the first column, every number whole on its line; the words of a text column
+    wrap at spaces; a table whose first column and one more do not fit at all is printed as aligned plain text."""
     from rich.console import Console
 
     from mechsys.report.tables import Table, to_rich
@@ -272,10 +274,20 @@ def test_a_narrow_terminal_folds_numbers_instead_of_cutting_them():
     console = Console(width=60, record=True)
     console.print(to_rich([t]))
     text = console.export_text()
-    assert "…" not in text
-    rows = [line.split("│") for line in text.splitlines() if line.startswith("│")]
-    assert "".join(r[3].strip() for r in rows) == "-2.542378e-17"  # the lean column, line by line
-    assert "".join(r[5].strip() for r in rows) == "8.628101e-17"
+    assert "…" not in text and max(len(line) for line in text.splitlines()) <= 60
+    cells = [c.strip() for line in text.splitlines() if line.startswith("│") for c in line.split("│")[1:-1]]
+    for number in ("0.0497", "-2.542378e-17", "2.645751", "8.628101e-17", "-2.645751"):
+        assert number in cells, number
+    headers = [line for line in text.splitlines() if line.startswith("┃")]
+    assert len(headers) >= 2 and all(h.split("┃")[1].strip() == "branch" for h in headers)  # the first column again
+    assert "branches [v to" in text  # each block's title names its columns
+    wide = Console(width=200, record=True)
+    wide.print(to_rich([t]))
+    assert sum(line.startswith("┃") for line in wide.export_text().splitlines()) == 1  # fits: one table
+    narrow = Console(width=20, record=True)
+    narrow.print(to_rich([t]), crop=False)  # as the CLI prints (emit_tables)
+    lines = narrow.export_text().splitlines()
+    assert lines[0] == "branches" and lines[3].split()[:3] == ["1", "0.0497", "-2.542378e-17"]
 
 
 def test_a_long_table_prints_as_aligned_text_with_every_row():

@@ -97,25 +97,77 @@ def _plain_text(t: Table, Text):
     return Text("\n".join([t.title, *lines]), no_wrap=True, overflow="ignore")
 
 
+class _Fitted:
+    """A table rendered at the console's width without breaking a number: columns whose cells are single tokens
+    (numbers, names) never wrap, columns of words wrap at spaces, and a table that does not fit even so is printed
+    in blocks of columns, each repeating the first column (a 16-coordinate model's mode shapes: before, rich folded
+    -1.173315e-14 onto three lines, "-1.173" on the first). A block that cannot fit one column beside the first
+    falls back to aligned plain text, one line per row."""
+
+    def __init__(self, table: Table) -> None:
+        from rich.cells import cell_len
+
+        self.table = table
+        self.cells = [[_cell(c) for c in row] for row in table.rows]
+        columns = [[h, *(row[k] for row in self.cells)] for k, h in enumerate(table.columns)]
+        self.tokens = [all(len(c.split()) <= 1 for c in col[1:]) for col in columns]
+        # the narrowest each column can be: a token column its widest cell or header, a text column its longest word
+        self.least = [max(cell_len(c) for c in col) if token else max(cell_len(w) for c in col for w in [*c.split(), ""])
+                      for col, token in zip(columns, self.tokens)]
+
+    def _width(self, columns: list[int]) -> int:
+        """The least width of a table of these columns: each padded by one space a side, one rule between and
+        around them."""
+        return sum(self.least[k] + 2 for k in columns) + len(columns) + 1
+
+    def blocks(self, width: int) -> list[list[int]] | None:
+        """The columns of each block at this width (one block when it fits); None if the first column and any
+        other do not fit together."""
+        n = len(self.table.columns)
+        if self._width(list(range(n))) <= width or n <= 1:
+            return [list(range(n))]
+        out: list[list[int]] = []
+        for k in range(1, n):
+            if out and self._width([*out[-1], k]) <= width:
+                out[-1].append(k)
+            elif self._width([0, k]) <= width:
+                out.append([0, k])
+            else:
+                return None
+        return out
+
+    def _rich(self, columns: list[int], title: str):
+        from rich.markup import escape
+        from rich.table import Table as RichTable
+        from rich.text import Text
+
+        rt = RichTable(title=escape(title))
+        for k in columns:
+            rt.add_column(escape(self.table.columns[k]), no_wrap=self.tokens[k], overflow="fold")
+        for row in self.cells:
+            rt.add_row(*[Text(row[k], overflow="fold") for k in columns])
+        return rt
+
+    def __rich_console__(self, console, options):
+        from rich.text import Text
+
+        blocks = self.blocks(options.max_width)
+        if blocks is None:
+            yield _plain_text(self.table, Text)
+            return
+        for columns in blocks:
+            title = self.table.title if len(blocks) == 1 else (
+                f"{self.table.title} [{self.table.columns[columns[1]]} to {self.table.columns[columns[-1]]}]")
+            yield self._rich(columns, title)
+
+
 def to_rich(tables: list[Table]) -> Group:
     from rich.console import Group
-    from rich.table import Table as RichTable
-
-    from rich.markup import escape
     from rich.text import Text
 
     parts = []
     for t in tables:
-        if len(t.rows) > LONG_TABLE:
-            parts.append(_plain_text(t, Text))
-            parts += [Text(f"  {n}") for n in t.notes]
-            continue
-        rt = RichTable(title=escape(t.title))
-        for c in t.columns:  # a narrow terminal folds a number onto two lines, never cuts it ("-2.54…" of -2.54e-17)
-            rt.add_column(escape(c), overflow="fold")
-        for row in t.rows:
-            rt.add_row(*[Text(_cell(c), overflow="fold") for c in row])
-        parts.append(rt)
+        parts.append(_plain_text(t, Text) if len(t.rows) > LONG_TABLE else _Fitted(t))
         parts += [Text(f"  {n}") for n in t.notes]
     return Group(*parts)
 

@@ -426,16 +426,20 @@ def _polish(problem: EquilibriumProblem, z: np.ndarray, p: np.ndarray) -> np.nda
         z = z + step
         if np.linalg.norm(step, np.inf) < 1e-14 * (1 + np.linalg.norm(z, np.inf)):
             break
+    return z if _is_root(problem, z, p) else None
+
+
+def _is_root(problem: EquilibriumProblem, z: np.ndarray, p: np.ndarray) -> bool:
+    """F(z) vanishes to 1e-10 of the Jacobian's largest entry (at least 1): the acceptance of every root."""
     F = problem.F(z, p)
     J = problem.J(z, p)
     scale = max(1.0, float(np.max(np.abs(J))))
-    if not np.all(np.isfinite(F)) or np.max(np.abs(F)) > 1e-10 * scale:
-        return None
-    return z
+    return bool(np.all(np.isfinite(F)) and np.max(np.abs(F)) <= 1e-10 * scale)
 
 
 def settle(problem: EquilibriumProblem, z: np.ndarray, p: np.ndarray, max_steps: int = 400) -> np.ndarray | None:
-    """The rest the flow z' = F(z) comes to from z, polished (_polish), or None if it does not come to one.
+    """The rest the flow z' = F(z) comes to from z, polished (_polish, entries within rounding of 0 set to 0), or
+    None if it does not come to one.
 
     Pseudo-transient continuation with switched evolution relaxation (Kelley and Keyes, SIAM J. Numer. Anal. 35,
     1998): steps (I/delta - J) s = F, delta growing as |F| falls, so the first steps follow the flow and the last
@@ -469,7 +473,13 @@ def settle(problem: EquilibriumProblem, z: np.ndarray, p: np.ndarray, max_steps:
         J = problem.J(z, p)
         if not np.all(np.isfinite(J)):
             return None
-    return _polish(problem, problem.normalize(z), p)
+    z = _polish(problem, problem.normalize(z), p)
+    if z is None:
+        return None
+    # a flow that comes to rest at 0 ends a rounding error away (1e-34 after Newton): those print as 0 where that
+    # is a root as well
+    snapped = np.where(np.abs(z) < 1e-14 * (1 + np.linalg.norm(z, np.inf)), 0.0, z)
+    return snapped if _is_root(problem, snapped, p) else z
 
 
 def _boxes(problem: EquilibriumProblem, search: dict[str, tuple[float, float]] | None) -> list[tuple[float, float]]:
