@@ -82,6 +82,27 @@ class EquilibriaResult:
         return equilibria_frame(self)
 
 
+#: functions whose derivative jumps or does not exist somewhere (EquilibriumProblem.non_smooth)
+#: and the reasons EquilibriumProblem.discontinuity gives
+_JUMPS = ("the forces at rest jump (a spring of zero length, a sign() law)", "the forces at rest are not defined nearby")
+_NON_SMOOTH = (sp.Abs, sp.sign, sp.Heaviside, sp.Min, sp.Max, sp.Piecewise, sp.floor, sp.ceiling)
+
+
+def _contains(exprs: list, kinds: tuple) -> bool:
+    """Whether a node of one of ``kinds`` occurs in the expressions, each shared node visited once."""
+    seen: set[int] = set()
+    stack = [e for m in exprs for e in (m if isinstance(m, sp.MatrixBase) else [m])]
+    while stack:
+        node = stack.pop()
+        if isinstance(node, kinds):
+            return True
+        for arg in node.args:
+            if id(arg) not in seen:
+                seen.add(id(arg))
+                stack.append(arg)
+    return False
+
+
 class EquilibriumProblem:
     """The algebraic equations of rest: f(q, u) + A^T lambda = 0 and Phi(q) = 0, with u = 0 except the steady
     rates of cyclic coordinates, which are unknowns (or fixed at their initial rate when the system leaves
@@ -299,6 +320,30 @@ class EquilibriumProblem:
         """Why the coordinates the analysis eliminates are not determined at z (a coordinate singularity of the
         model, not a steady motion one can linearize about), or None. Only systems with velocity constraints
         eliminate coordinates and speeds (analysis/equilibrium/nonholonomic.py); gimbal locks are charts.py's."""
+        return None
+
+    @cached_property
+    def non_smooth(self) -> bool:
+        """The equations of motion contain a function that is not smooth everywhere (a 1-D spring's length |x|, a
+        sign() law, Heaviside, min, max): their rest equations may jump where it switches (see discontinuity)."""
+        eq = self.model.equations(INTERNAL_METHOD)
+        return _contains([eq.M, eq.f, eq.A, eq.b, self.model.holonomic_constraints], _NON_SMOOTH)
+
+    def discontinuity(self, z: np.ndarray, p: np.ndarray) -> str | None:
+        """Why z is not a rest although F(z) = 0: the rest equations jump across z (a spring of zero length pushes
+        both ways, its direction undefined; sympy's sign(0) = 0 makes F vanish there), or None. A jump is a
+        difference F(z + h e_k) - F(z - h e_k) that does not shrink with h."""
+        if not self.non_smooth:
+            return None
+        for k in range(len(z)):
+            h = 1e-6 * (1 + abs(z[k]))
+            wide, narrow = (self.F(z + d * np.eye(len(z))[k], p) - self.F(z - d * np.eye(len(z))[k], p)
+                            for d in (h, h / 100))
+            if not (np.all(np.isfinite(wide)) and np.all(np.isfinite(narrow))):
+                return _JUMPS[1]
+            size = float(np.max(np.abs(wide)))
+            if size > 1e-9 * max(1.0, float(np.max(np.abs(self.J(z, p))))) and np.max(np.abs(narrow)) > 0.5 * size:
+                return _JUMPS[0]
         return None
 
     def equilibrium(self, z: np.ndarray) -> Equilibrium:
@@ -708,12 +753,12 @@ def _search(problem: EquilibriumProblem, p: np.ndarray, plan: SearchReport, seed
 
 def drop_singular(problem: EquilibriumProblem, roots: list[np.ndarray], p: np.ndarray,
                   dropped: dict[str, list[np.ndarray]] | None = None) -> list[np.ndarray]:
-    """The roots at which the coordinates the analysis eliminates are determined; the others (coordinate
-    singularities of the model: no linearization, no continuation, no verdict there) are added to ``dropped``
-    by reason (see singular_note)."""
+    """The roots at which the coordinates the analysis eliminates are determined and the rest equations do not
+    jump; the others (singular points of the model: no linearization, no continuation, no verdict there) are
+    added to ``dropped`` by reason (see singular_note)."""
     kept = []
     for z in roots:
-        why = problem.split_singularity(z, p)
+        why = problem.split_singularity(z, p) or problem.discontinuity(z, p)
         if why is None:
             kept.append(z)
         elif dropped is not None:
@@ -727,8 +772,10 @@ def singular_note(problem: EquilibriumProblem, dropped: dict[str, list[np.ndarra
     for why, zs in dropped.items():
         where = ", ".join(f"{c} = {wrap(v) if problem.angles.get(c, False) else v:.6g}"
                           for c, v in zip(problem.free, zs[0]))
-        notes.append(f"{len(zs)} root(s) where {why} (e.g. {where}) are coordinate singularities of the model, not "
-                     f"steady motions one can linearize about: not {what}")
+        kind = "points where the equations of motion are not smooth" if why in _JUMPS else \
+            "coordinate singularities of the model"
+        notes.append(f"{len(zs)} root(s) where {why} (e.g. {where}) are {kind}, not steady motions one can "
+                     f"linearize about: not {what}")
     return "; ".join(notes)
 
 

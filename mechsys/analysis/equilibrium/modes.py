@@ -121,7 +121,7 @@ def _settled(model: MechanicalModel) -> Equilibrium | None:
         return None
     p = parameter_values(model)
     z = settle(problem, np.array([model.doc.initial.get(c, 0.0) for c in problem.free], dtype=float), p)
-    if z is None or not is_isolated(problem, z, p):
+    if z is None or problem.discontinuity(z, p) or not is_isolated(problem, z, p):
         return None
     e = problem.equilibrium(z)
     if singularities(model, e.coordinates, p):

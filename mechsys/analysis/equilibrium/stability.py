@@ -375,7 +375,8 @@ def _constrained_hessian(problem, e, p: np.ndarray, H: np.ndarray) -> np.ndarray
 
 
 def _higher_order(U: sp.Expr, qn: list, problem, q0: np.ndarray, p: np.ndarray, v: np.ndarray) -> tuple[int, float]:
-    """First non-vanishing derivative (order 3..6) of U along q0 + s v at s = 0."""
+    """First non-vanishing derivative (order 3..6) of U along q0 + s v at s = 0; (0, 0.0), undecided, where a
+    derivative is not a finite number (U not smooth there)."""
     s = sp.Symbol("s_dir", real=True)
     line = U.xreplace({q: float(q0[i]) + float(v[i]) * s for i, q in enumerate(qn)})
     line = line.xreplace({s: sp.Float(float(x)) for s, x in zip(problem.model.parameter_symbols, p)})
@@ -383,7 +384,13 @@ def _higher_order(U: sp.Expr, qn: list, problem, q0: np.ndarray, p: np.ndarray, 
     terms = []
     for order in range(3, 7):
         deriv = sp.diff(deriv, s)
-        terms.append((order, float(deriv.xreplace({s: 0}).evalf()) / math.factorial(order)))
+        try:
+            value = float(deriv.xreplace({s: 0}).evalf()) / math.factorial(order)
+        except TypeError:  # a complex or unevaluated value (the derivative of sign(), Abs() at its switch)
+            return 0, 0.0
+        if not math.isfinite(value):
+            return 0, 0.0
+        terms.append((order, value))
     scale = max(abs(c) for _, c in terms)
     for order, coeff in terms:
         if scale > 0 and abs(coeff) > 1e-6 * scale:
