@@ -307,16 +307,40 @@ def review(problem: EquilibriumProblem, equilibria: list[Equilibrium], p: np.nda
             seen.add(recharted)
         except (Unchartable, np.linalg.LinAlgError) as exc:
             undecided += 1
-            e.eigenvalues, e.jacobian, e.critical = np.zeros(0, complex), None, False
-            e.stability = "undecided"
-            e.reason = f"{where.describe()}; {exc}: no verdict from this chart (write the joint with another " \
-                       f"sequence whose singular set avoids this orientation)"
+            _undecided(e, where, str(exc))
         kept.append(e)
     notes = []
     if dropped:
         notes.append(f"{dropped} solution(s) at a gimbal-lock point are not steady motions in a regular chart "
                      f"(artefacts of the singular angles) and are not listed")
     if undecided:
-        notes.append(f"{undecided} equilibri{'um is' if undecided == 1 else 'a are'} at a coordinate singularity "
-                     f"and could not be classified")
+        notes.append(_undecided_note(undecided, "equilibri" + ("um is" if undecided == 1 else "a are")))
     return kept, "; ".join(notes)
+
+
+def mark_unchartable(problem: EquilibriumProblem, equilibria: list[Equilibrium],
+                     p: np.ndarray) -> tuple[list[Equilibrium], str]:
+    """review for systems with velocity constraints: a steady motion at a singular point of a rotation chart is
+    kept as 'undecided' with the reason (its linearization, read off the singular chart, is meaningless: a rolling
+    ball pushed by a force had made-up steady motions at the zyx gimbal lock, 'unstable' with eigenvalues of 4e8),
+    since re-charting solves the holonomic rest equations only. Returns the equilibria and a note."""
+    undecided = 0
+    for e in equilibria:
+        found = singularities(problem.model, e.coordinates, p)
+        if found:
+            undecided += 1
+            e.chart = found[0].describe()
+            _undecided(e, found[0], "re-charting is not available for systems with velocity constraints")
+    plural = "steady motion is" if undecided == 1 else "steady motions are"
+    return equilibria, _undecided_note(undecided, plural) if undecided else ""
+
+
+def _undecided(e: Equilibrium, where: Singularity, why: str) -> None:
+    e.eigenvalues, e.jacobian, e.critical = np.zeros(0, complex), None, False
+    e.stability = "undecided"
+    e.reason = f"{where.describe()}; {why}: no verdict from this chart (write the joint with another " \
+               f"sequence whose singular set avoids this orientation)"
+
+
+def _undecided_note(count: int, what: str) -> str:
+    return f"{count} {what} at a coordinate singularity and could not be classified"

@@ -869,7 +869,7 @@ def find_equilibria(model: MechanicalModel, search: dict[str, tuple[float, float
     else:
         plan = search_plan(problem, search, starts)
         roots = solve_equilibria(problem, p, search, starts, seed, plan)
-    from mechsys.analysis.equilibrium.charts import review
+    from mechsys.analysis.equilibrium.charts import mark_unchartable, review
 
     dropped: dict[str, list[np.ndarray]] = {}
     roots = drop_singular(problem, roots, p, dropped)
@@ -887,7 +887,7 @@ def find_equilibria(model: MechanicalModel, search: dict[str, tuple[float, float
                    "one representative of the continuum is shown")
     equilibria = [problem.equilibrium(z) for z in isolated]
     assess_all(problem, equilibria, p)
-    equilibria, chart_note = review(problem, equilibria, p) if model.is_holonomic else (equilibria, "")
+    equilibria, chart_note = (review if model.is_holonomic else mark_unchartable)(problem, equilibria, p)
     message = "; ".join(m for m in (message, chart_note, singular_note(problem, dropped)) if m)
     equilibria.sort(key=lambda e: tuple(e.coordinates.values()) + tuple(e.rates.values()))
     if not equilibria:

@@ -130,6 +130,15 @@ def _settled(model: MechanicalModel) -> Equilibrium | None:
     return e if e.stability in _STABLE else None
 
 
+def _regular(res, kind: str) -> list[Equilibrium]:
+    """The equilibria found that are not at a singular point of a rotation chart (charts.py); none: an error."""
+    regular = [e for e in res.equilibria if not e.chart]
+    if not regular:
+        raise AnalysisError(f"every {kind} found is at a {res.equilibria[0].chart}: the linearization in these "
+                            "coordinates is singular; write the joint with another sequence")
+    return regular
+
+
 def _equilibrium(model: MechanicalModel, at: dict[str, float] | None) -> tuple[Equilibrium, str]:
     """The equilibrium to vibrate about and, when it is unstable for want of a stable one, a note saying so:
     the stable rest the model settles at from its initial configuration, else the first stable equilibrium of the
@@ -141,11 +150,7 @@ def _equilibrium(model: MechanicalModel, at: dict[str, float] | None) -> tuple[E
         res = find_equilibria(model)
         if not res.equilibria:
             raise AnalysisError("no equilibrium found to vibrate about; give one with --at")
-        regular = [e for e in res.equilibria if not e.chart]
-        if not regular:
-            raise AnalysisError(f"every equilibrium found is at a {res.equilibria[0].chart}: the linearization in "
-                                "these coordinates is singular; write the joint with another sequence")
-        return _first_stable(res, regular)
+        return _first_stable(res, _regular(res, "equilibrium"))
     problem = EquilibriumProblem(model)
     unknown = set(at) - set(problem.free) - set(problem.rate_unknowns)
     if unknown:
@@ -161,14 +166,19 @@ def _equilibrium(model: MechanicalModel, at: dict[str, float] | None) -> tuple[E
     from mechsys.analysis.equilibrium.stability import assess
 
     e = problem.equilibrium(z)
+    _refuse_singular(model, e, p)
+    assess(problem, e, p)
+    return e, ""
+
+
+def _refuse_singular(model: MechanicalModel, e: Equilibrium, p: np.ndarray) -> None:
+    """An error when the --at point is at a singular point of a rotation chart."""
     from mechsys.analysis.equilibrium.charts import singularities
 
     found = singularities(model, e.coordinates, p)
     if found:
         raise AnalysisError(f"--at is at a {found[0].describe()}: the linearization in these coordinates is "
                             "singular; write the joint with another sequence")
-    assess(problem, e, p)
-    return e, ""
 
 
 def reduce(model: MechanicalModel, lin: Linearization) -> tuple[ReducedSystem, list[str]]:
@@ -267,7 +277,7 @@ def steady_modes(model: MechanicalModel, at: dict[str, float] | None = None,
         res = find_equilibria(model, options=options)
         if not res.equilibria:
             raise AnalysisError("no steady motion found to vibrate about; give one with --at")
-        e, note = _first_stable(res, res.equilibria, "steady motion")
+        e, note = _first_stable(res, _regular(res, "steady motion"), "steady motion")
     else:
         note = ""
         unknown = set(at) - set(problem.free) - {f"der({c})" for c in problem.rate_unknowns}
@@ -280,6 +290,7 @@ def steady_modes(model: MechanicalModel, at: dict[str, float] | None = None,
         if z is None or np.linalg.norm(z[:len(draw)] - draw) > 1e-6 * (1 + np.linalg.norm(draw)):
             raise AnalysisError("--at is not a steady motion (the steady-motion equations are not satisfied there)")
         e = problem.equilibrium(z)
+        _refuse_singular(model, e, p)
         assess(problem, e, p)
     lin = linearize_steady(problem, e, p)
     nxi = len(lin.coordinates)

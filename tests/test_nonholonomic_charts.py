@@ -1,0 +1,53 @@
+"""Steady motions of systems with velocity constraints at a singular point of a rotation chart (equilibria.md
+§2.7): kept as `undecided` with the chart's reason, never classified off the singular chart, and never the point
+`modes` vibrates about.
+
+The model (tests/data/beyond/pushed_ball.yaml, written as a user would): a solid ball, m = 1, rolling without slip
+on a plane, pushed at its centre by F = 1.4. Rolling: F - f = m a, f r = (2/5) m r^2 (a / r), so a = 5F/(7m) = 1
+m/s^2 in every orientation and nothing about it is steady. At the zyx gimbal lock (a2 = +-pi/2) the singular chart
+made four 'unstable steady motions' with eigenvalues of 4.4e8, and `modes` reported 70 MHz modes.
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from mechsys.cli import app
+
+BALL = Path(__file__).resolve().parent / "data" / "beyond" / "pushed_ball.yaml"
+
+
+def _run(*args: str):
+    return CliRunner().invoke(app, [*args])
+
+
+def test_the_ball_accelerates_at_five_sevenths_of_f_over_m():
+    """The model is right: x(2 s) = a t^2 / 2 = 2 with a = 5F/(7m) = 1, from rest."""
+    result = _run("simulate", str(BALL), "--t-end", "2", "-f", "json")
+    assert result.exit_code == 0, result.output
+    data = json.loads(result.output)
+    assert data["simulation summary"]["x(t_end)"] == pytest.approx(2.0, rel=1e-9)
+
+
+def test_steady_motions_at_the_gimbal_lock_are_undecided_with_the_reason():
+    result = _run("equilibria", str(BALL), "-f", "json")
+    assert result.exit_code == 0, result.output
+    data = json.loads(result.output)
+    assert data["equilibria"], "the search finds the singular chart's points"
+    for e in data["equilibria"]:
+        assert abs(abs(e["coordinates"]["a2"]) - 1.5707963267948966) < 1e-9
+        assert e["stability"] == "undecided"
+        assert e["reason"].startswith("coordinate singularity: the zyx angles (a1, a2, a3) of the spherical joint")
+        assert "re-charting is not available for systems with velocity constraints" in e["reason"]
+    assert f"{len(data['equilibria'])} steady motions are at a coordinate singularity" in data["message"]
+
+
+@pytest.mark.parametrize("at", [(), ("--at", "a1=1.5707963267948966", "--at", "a2=1.5707963267948966")])
+def test_modes_refuse_the_singular_chart(at):
+    result = _run("modes", str(BALL), *at)
+    assert result.exit_code == 1
+    assert "coordinate singularity: the zyx angles" in result.output
+    assert "the linearization in these coordinates is singular" in result.output
