@@ -155,3 +155,20 @@ def test_eight_mode_shapes_print_in_blocks_with_every_number_whole(monkeypatch):
         for value in mode["shape"].values():
             assert fmt_number(value) in cells, fmt_number(value)
     assert sum(line.startswith("┃ coordinate") for line in lines) == 2
+
+
+def test_a_steady_motion_says_its_frequencies_are_the_eigenvalues():
+    """A conical pendulum turning at W = 4 rad/s (tests/data/beyond/conical_pendulum.yaml): the cone has
+    cos(pol) = g/(W^2 l) and the small oscillations about it, gyroscopically coupled to the azimuth, have
+    frequency W sqrt(1 + 3 cos^2(pol)) = 5.834747 rad/s (a closed form: linearize m l^2 (pol'' - W^2 sin cos)
+    + m g l sin = 0 with the azimuth's momentum conserved). The table's 3.159944 rad/s is (K, M) without G: the
+    output now says so and names 5.834747."""
+    W, g, l = 4.0, 9.81, 1.0
+    c = g / (W**2 * l)
+    data = _modes_json(DATA / "beyond" / "conical_pendulum.yaml")
+    assert data["equilibrium"]["coordinates"]["pol"] == pytest.approx(math.acos(c), abs=1e-12)
+    true = W * math.sqrt(1 + 3 * c**2)
+    assert max(abs(v[1]) for v in data["eigenvalues"]) == pytest.approx(true, rel=1e-9)
+    assert data["coupling"].startswith("gyroscopic terms couple the coordinates")
+    assert f"|Im λ| = {true:.7g} rad/s" in data["coupling"]
+    assert "coupling" not in _modes_json(ROOT / "systems" / "spring_chain.yaml")

@@ -180,6 +180,8 @@ def modes_tables(modes: Modes) -> list[Table]:
         t.notes.append(f"{modes.unstable_modes} mode(s) with negative stiffness: the equilibrium is statically unstable")
     if modes.note:
         t.notes.append(modes.note)
+    if modes.coupling:
+        t.notes.append(modes.coupling)
     return [t, s]
 
 

@@ -36,6 +36,7 @@ class Modes:
     unstable_modes: int = 0
     system: "ReducedSystem | None" = None
     note: str = ""  # why the equilibrium is an unstable one (the search found no stable equilibrium), else ""
+    coupling: str = ""  # gyroscopic or circulatory terms: the motion's frequencies are not those above, else ""
 
     @property
     def frequencies_hz(self) -> np.ndarray:
@@ -53,6 +54,7 @@ class Modes:
             "condensed": self.condensed,
             "unstable_modes": self.unstable_modes,
             **({"note": self.note} if self.note else {}),
+            **({"coupling": self.coupling} if self.coupling else {}),
         }
 
     def _repr_markdown_(self) -> str:
@@ -258,7 +260,29 @@ def vibration_modes(model: MechanicalModel, at: dict[str, float] | None = None,
             if abs(zeta[k]) < 1e-12:
                 zeta[k] = 0.0
     names = list(lin.coordinates)
-    return Modes(names, e, freqs, shapes, rigid, zeta, vals, condensed, unstable, red, note)
+    return Modes(names, e, freqs, shapes, rigid, zeta, vals, condensed, unstable, red, note, _coupling(red, vals))
+
+
+def _coupling(red: ReducedSystem, eigenvalues: np.ndarray) -> str:
+    """A note when gyroscopic (skew C) or circulatory (skew K) terms act: the natural frequencies are those of M
+    and the symmetric K alone, and the motion oscillates at the damped eigenvalues' frequencies instead (a conical
+    pendulum at 4 rad/s: 3.159944 rad/s from (K, M), 5.834747 rad/s in fact)."""
+    M, C, K = red.M, red.C, red.K
+    if not M.size:
+        return ""
+    G, N = (C - C.T) / 2, (K - K.T) / 2
+    scale = float(np.sqrt(np.max(np.abs(M)) * max(float(np.max(np.abs(K))), 1e-300)))
+    terms = [name for name, X, size in (("gyroscopic", G, scale), ("circulatory", N, float(np.max(np.abs(K)))))
+             if float(np.max(np.abs(X))) > 1e-9 * size]
+    if not terms:
+        return ""
+    top = max(1.0, float(np.max(np.abs(eigenvalues)))) if eigenvalues.size else 1.0
+    found = sorted({round(float(abs(v.imag)), 12) for v in eigenvalues if abs(v.imag) > 1e-9 * top})
+    shown = ", ".join(f"{w:.7g}" for w in found[:8]) + (", ..." if len(found) > 8 else "")
+    where = f"|Im λ| = {shown} rad/s" if found else "no oscillating eigenvalue"
+    return (f"{' and '.join(terms)} terms couple the coordinates: the frequencies above are those of M and the "
+            f"symmetric K alone; the motion oscillates at the damped eigenvalues' frequencies, {where} "
+            f"(JSON eigenvalues; modes.md §5)")
 
 
 def steady_modes(model: MechanicalModel, at: dict[str, float] | None = None,
