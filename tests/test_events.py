@@ -176,3 +176,27 @@ def test_a_run_that_starts_on_an_event_surface_has_not_crossed_it(tmp_path, meth
     r = simulate(mechsys.load(path), 2.0, 0.01, method)
     assert [ev["event"] for ev in r.events] == ["ground"]
     assert r.events[0]["t"] == pytest.approx((2 * 2 / 9.81) ** 0.5, rel=1e-8)
+
+
+@pytest.mark.parametrize("fmt", ["json", "text"])
+def test_the_summary_says_which_event_stopped_the_run_and_when(fmt, monkeypatch):
+    """A run ended by a stop event printed y(t_end), der(y)(t_end) ... with nothing to say they are at the stop,
+    not at --t-end. The summary now names the event and the time: the ground at sqrt(2h/g) = 0.638551 s (h = 2),
+    where der(y) = -sqrt(2 g h); a run with no stop keeps its summary as it was."""
+    monkeypatch.setenv("COLUMNS", "120")
+    path = FALL
+    t_ground = math.sqrt(2 * 2 / 9.81)
+    result = CliRunner().invoke(app, ["simulate", str(path), "--t-end", "5", "-f", fmt])
+    assert result.exit_code == 0, result.output
+    if fmt == "json":
+        summary = json.loads(result.output)["simulation summary"]
+        assert summary["stopped by event"] == "ground"
+        assert summary["stopped at t"] == pytest.approx(t_ground, rel=1e-8)
+        assert summary["der(y)(t_end)"] == pytest.approx(-math.sqrt(2 * 9.81 * 2), rel=1e-8)
+        keys = list(summary)
+        assert keys.index("stopped at t") < keys.index("y(t_end)")
+        before = json.loads(CliRunner().invoke(app, ["simulate", str(path), "--t-end", "0.5", "-f", "json"]).output)
+        assert "stopped by event" not in before["simulation summary"]
+    else:
+        assert "stopped by event" in result.output and "ground" in result.output
+        assert f"{t_ground:.6f}" in result.output

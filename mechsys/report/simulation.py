@@ -229,12 +229,24 @@ def _read_parquet(path: Path) -> tuple[list[str], np.ndarray]:
     return names, np.column_stack(columns) if columns[0].size else np.zeros((0, len(names)))
 
 
+def _stopped_by(result: SimulationResult) -> dict | None:
+    """The event with action stop that ended the run (at its last output time), or None."""
+    last = float(result.t[-1]) if len(result.t) else 0.0
+    stops = [ev for ev in result.events
+             if ev.get("action") == "stop" and abs(ev["t"] - last) <= 1e-9 * max(1.0, abs(last))]
+    return stops[-1] if stops else None
+
+
 def summary_table(result: SimulationResult) -> list[Table]:
     t = Table("simulation summary", ["quantity", "value"])
     t.add("method", result.method)
     t.add("output points", len(result.t))
     t.add("integrator steps", result.steps if result.steps is not None else "n/a")
     t.add("RHS evaluations", result.rhs_evaluations)
+    stop = _stopped_by(result)
+    if stop is not None:  # the (t_end) values below are at the stop, not at --t-end
+        t.add("stopped by event", stop["event"])
+        t.add("stopped at t", float(result.t[-1]))
     for c, q, u in zip(result.coordinates, result.q[-1], result.u[-1]):
         t.add(f"{c}(t_end)", float(q))
         t.add(f"der({c})(t_end)", float(u))
