@@ -98,11 +98,12 @@ def _plain_text(t: Table, Text):
 
 
 class _Fitted:
-    """A table rendered at the console's width without breaking a number: columns whose cells are single tokens
-    (numbers, names) never wrap, columns of words wrap at spaces, and a table that does not fit even so is printed
-    in blocks of columns, each repeating the first column (a 16-coordinate model's mode shapes: before, rich folded
-    -1.173315e-14 onto three lines, "-1.173" on the first). A block that cannot fit one column beside the first
-    falls back to aligned plain text, one line per row."""
+    """A table rendered at the console's width without breaking a number. A table that fits is rich's own. One
+    that does not gets column widths that shrink only columns of words (wrapped at spaces) and headers (wrapped at
+    spaces), never below a column's longest number or name; if even that does not fit, it is printed in blocks of
+    columns, each repeating the first (a 16-coordinate model's mode shapes: rich folded -1.173315e-14 onto three
+    lines, "-1.173" on the first). A block that cannot fit one column beside the first falls back to aligned plain
+    text, one line per row. A title wider than its table is printed above it, not wrapped to the table's width."""
 
     def __init__(self, table: Table) -> None:
         from rich.cells import cell_len
@@ -110,55 +111,88 @@ class _Fitted:
         self.table = table
         self.cells = [[_cell(c) for c in row] for row in table.rows]
         columns = [[h, *(row[k] for row in self.cells)] for k, h in enumerate(table.columns)]
-        self.tokens = [all(len(c.split()) <= 1 for c in col[1:]) for col in columns]
-        # the narrowest each column can be: a token column its widest cell or header, a text column its longest word
-        self.least = [max(cell_len(c) for c in col) if token else max(cell_len(w) for c in col for w in [*c.split(), ""])
-                      for col, token in zip(columns, self.tokens)]
+        tokens = [all(len(c.split()) <= 1 for c in col[1:]) for col in columns]
 
-    def _width(self, columns: list[int]) -> int:
-        """The least width of a table of these columns: each padded by one space a side, one rule between and
-        around them."""
-        return sum(self.least[k] + 2 for k in columns) + len(columns) + 1
+        def longest_word(texts: list[str]) -> int:
+            return max((cell_len(w) for c in texts for w in c.split()), default=0)
+
+        #: the widest each column is, and the narrowest it may be: its longest word, its longest cell when every cell
+        #: is one token (a number, a name)
+        self.natural = [max(cell_len(c) for c in col) for col in columns]
+        self.least = [max(longest_word(col), max(cell_len(c) for c in col[1:]) if token and col[1:] else 0)
+                      for col, token in zip(columns, tokens)]
+
+    @staticmethod
+    def _total(widths: list[int]) -> int:
+        """A table's width: each column padded by one space a side, one rule between and around them."""
+        return sum(w + 2 for w in widths) + len(widths) + 1
 
     def blocks(self, width: int) -> list[list[int]] | None:
         """The columns of each block at this width (one block when it fits); None if the first column and any
         other do not fit together."""
         n = len(self.table.columns)
-        if self._width(list(range(n))) <= width or n <= 1:
+        least = lambda cols: self._total([self.least[k] for k in cols])  # noqa: E731
+        if least(range(n)) <= width or n <= 1:
             return [list(range(n))]
         out: list[list[int]] = []
         for k in range(1, n):
-            if out and self._width([*out[-1], k]) <= width:
+            if out and least([*out[-1], k]) <= width:
                 out[-1].append(k)
-            elif self._width([0, k]) <= width:
+            elif least([0, k]) <= width:
                 out.append([0, k])
             else:
                 return None
         return out
 
-    def _rich(self, columns: list[int], title: str):
+    def _widths(self, columns: list[int], width: int) -> list[int] | None:
+        """Column widths that fit ``width``: None when the natural ones do (rich lays the table out), else the
+        widest column above its least width narrowed one cell at a time."""
+        widths = [self.natural[k] for k in columns]
+        if self._total(widths) <= width:
+            return None
+        floor = [self.least[k] for k in columns]
+        while self._total(widths) > width:
+            k = max((i for i in range(len(widths)) if widths[i] > floor[i]), key=lambda i: widths[i], default=None)
+            if k is None:
+                break
+            widths[k] -= 1
+        return widths
+
+    def _rich(self, columns: list[int], title: str, width: int):
         from rich.markup import escape
         from rich.table import Table as RichTable
         from rich.text import Text
 
-        rt = RichTable(title=escape(title))
-        for k in columns:
-            rt.add_column(escape(self.table.columns[k]), no_wrap=self.tokens[k], overflow="fold")
+        widths = self._widths(columns, width)
+        total = self._total(widths if widths is not None else [self.natural[k] for k in columns])
+        above = cell_width(title) > total
+        rt = RichTable(title=None if above else escape(title))
+        for i, k in enumerate(columns):
+            rt.add_column(escape(self.table.columns[k]), overflow="fold", width=None if widths is None else widths[i])
         for row in self.cells:
             rt.add_row(*[Text(row[k], overflow="fold") for k in columns])
-        return rt
+        return [Text(title), rt] if above else [rt]
 
     def __rich_console__(self, console, options):
         from rich.text import Text
 
-        blocks = self.blocks(options.max_width)
+        width = options.max_width
+        blocks = self.blocks(width)
         if blocks is None:
             yield _plain_text(self.table, Text)
             return
         for columns in blocks:
-            title = self.table.title if len(blocks) == 1 else (
-                f"{self.table.title} [{self.table.columns[columns[1]]} to {self.table.columns[columns[-1]]}]")
-            yield self._rich(columns, title)
+            title = self.table.title
+            if len(blocks) > 1:
+                names = [self.table.columns[k] for k in columns[1:]]
+                title += f" [{names[0]}]" if len(names) == 1 else f" [{names[0]} to {names[-1]}]"
+            yield from self._rich(columns, title, width)
+
+
+def cell_width(text: str) -> int:
+    from rich.cells import cell_len
+
+    return cell_len(text)
 
 
 def to_rich(tables: list[Table]) -> Group:
