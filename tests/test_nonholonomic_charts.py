@@ -51,3 +51,13 @@ def test_modes_refuse_the_singular_chart(at):
     assert result.exit_code == 1
     assert "coordinate singularity: the zyx angles" in result.output
     assert "the linearization in these coordinates is singular" in result.output
+
+
+def test_a_run_started_at_the_gimbal_lock_stops_at_once_with_the_reason():
+    """With rolling constraints the augmented system at the lock is only nearly singular: the run ground on for
+    seconds and failed blaming a stiff scene or a sign() law. It now stops before integrating, naming the chart
+    (simulate.md: a run that cannot re-chart stops with `coordinate singularity: ...`)."""
+    result = _run("simulate", str(BALL), "-s", "a1=1.5707963267948966", "-s", "a2=1.5707963267948966")
+    assert result.exit_code == 1
+    flat = " ".join(result.output.split())
+    assert "the start is at a coordinate singularity: the zyx angles of the spherical joint of 'ball'" in flat

@@ -461,7 +461,8 @@ def _wrap(d: np.ndarray) -> np.ndarray:
 
 
 def _polish(problem: EquilibriumProblem, z: np.ndarray, p: np.ndarray) -> np.ndarray | None:
-    """Plain Newton to full accuracy, then accept only a genuine zero of F."""
+    """Plain Newton to full accuracy, then accept only a genuine zero of F; entries within rounding of 0 are set
+    to 0 where that is a root as well (Newton's last step leaves -2.35e-38 where the root is at 0)."""
     for _ in range(8):
         F = problem.F(z, p)
         J = problem.J(z, p)
@@ -471,7 +472,10 @@ def _polish(problem: EquilibriumProblem, z: np.ndarray, p: np.ndarray) -> np.nda
         z = z + step
         if np.linalg.norm(step, np.inf) < 1e-14 * (1 + np.linalg.norm(z, np.inf)):
             break
-    return z if _is_root(problem, z, p) else None
+    if not _is_root(problem, z, p):
+        return None
+    snapped = np.where(np.abs(z) < 1e-14 * (1 + np.linalg.norm(z, np.inf)), 0.0, z)
+    return snapped if not np.array_equal(snapped, z) and _is_root(problem, snapped, p) else z
 
 
 def _is_root(problem: EquilibriumProblem, z: np.ndarray, p: np.ndarray) -> bool:
@@ -483,8 +487,7 @@ def _is_root(problem: EquilibriumProblem, z: np.ndarray, p: np.ndarray) -> bool:
 
 
 def settle(problem: EquilibriumProblem, z: np.ndarray, p: np.ndarray, max_steps: int = 400) -> np.ndarray | None:
-    """The rest the flow z' = F(z) comes to from z, polished (_polish, entries within rounding of 0 set to 0), or
-    None if it does not come to one.
+    """The rest the flow z' = F(z) comes to from z, polished (_polish), or None if it does not come to one.
 
     Pseudo-transient continuation with switched evolution relaxation (Kelley and Keyes, SIAM J. Numer. Anal. 35,
     1998): steps (I/delta - J) s = F, delta growing as |F| falls, so the first steps follow the flow and the last
@@ -518,13 +521,7 @@ def settle(problem: EquilibriumProblem, z: np.ndarray, p: np.ndarray, max_steps:
         J = problem.J(z, p)
         if not np.all(np.isfinite(J)):
             return None
-    z = _polish(problem, problem.normalize(z), p)
-    if z is None:
-        return None
-    # a flow that comes to rest at 0 ends a rounding error away (1e-34 after Newton): those print as 0 where that
-    # is a root as well
-    snapped = np.where(np.abs(z) < 1e-14 * (1 + np.linalg.norm(z, np.inf)), 0.0, z)
-    return snapped if _is_root(problem, snapped, p) else z
+    return _polish(problem, problem.normalize(z), p)
 
 
 def _boxes(problem: EquilibriumProblem, search: dict[str, tuple[float, float]] | None) -> list[tuple[float, float]]:

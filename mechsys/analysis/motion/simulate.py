@@ -682,11 +682,25 @@ def constraint_residual(c: Compiled, p: np.ndarray, grid: np.ndarray, q: np.ndar
                      for t, qi, ui in zip(grid, q, u)])
 
 
+def _refuse_singular_chart(c: Compiled, q: np.ndarray) -> None:
+    """An error when the start is at a gimbal lock of a rotation chart. The runs that can re-chart start in another
+    sequence (charted.py) and never get here at a lock; without constraints the singular mass matrix stops the
+    others at the first step, but with them (rolling, closed loops) the augmented system is only nearly singular,
+    and a ball started at its zyx lock ground on for seconds before failing with another reason."""
+    from mechsys.numeric.rotations import singular_chart
+
+    chart = singular_chart(c.charts, q)
+    if chart:
+        raise AnalysisError(f"the start is at a {chart}; start away from it or write the joint with another sequence "
+                            "(zyx is singular where the middle angle is +-pi/2, zxz where it is 0 or pi)")
+
+
 def _start(model: MechanicalModel, c: Compiled, p: np.ndarray) -> tuple[np.ndarray, np.ndarray, list[str]]:
     """The consistent initial state and what the summary should say about it (assembly, conditioning)."""
     guess_q, guess_u = file_state(model)
     q0, u0 = project(c, p, 0.0, guess_q, guess_u)
     check_on_manifold(c, p, 0.0, q0, u0)
+    _refuse_singular_chart(c, q0)
     warnings = []
     moved = [f"{name} = {qa:.10g} (guess {qg:.10g})" for name, qa, qg in zip(model.coordinates, q0, guess_q)
              if abs(qa - qg) > 1e-9 * (1 + abs(qg))]
