@@ -14,22 +14,46 @@ if TYPE_CHECKING:
     from mechsys.mechanics.model import MechanicalModel
 
 
-def _pressed(rhs, t: float, q: np.ndarray, u: np.ndarray, trial: list[int]) -> list[int]:
+def _pressed(rhs, t: float, q: np.ndarray, u: np.ndarray, trial: list[int], step: float = 0.0) -> list[int]:
     """The touching contacts among ``trial`` that a persistent row would press (compressive multiplier). Rows are
-    added together and the most tensile one is dropped until the rest are all compressive."""
+    added together and the most tensile one is dropped until the rest are all compressive. A force that is zero
+    right now is judged a moment later (``_soon``): after a plastic impact on a body whose spring is at its free
+    length, or on a pendulum bob hanging straight down, the contact force starts at 0 and grows; judged 'not
+    pressed', the bodies passed through each other, unwatched."""
     trial = list(trial)
     base = list(rhs.persistent)
     while trial:
         rhs.persistent[:] = base + trial
         try:
-            lam = rhs.accelerations(t, q, u)[1][-len(trial):]
+            acc, lam = rhs.accelerations(t, q, u)
+            lam = lam[-len(trial):]
+            tol = 1e-12 * max(1.0, float(np.max(np.abs(lam))))
+            if np.all(lam > tol):
+                return trial
+            if np.all(lam >= -tol):
+                later = _soon(rhs, t, q, u, acc, step)[-len(trial):]
+                zero = np.abs(lam) <= tol
+                if np.all(later[zero] > _round_off(rhs, t, q, u, later)):
+                    return trial
+                lam = np.where(zero, later, lam)
         finally:
             rhs.persistent[:] = base
-        tol = 1e-12 * max(1.0, float(np.max(np.abs(lam))))
-        if np.all(lam > tol):
-            return trial
         del trial[int(np.argmin(lam))]
     return []
+
+
+def _round_off(rhs, t: float, q: np.ndarray, u: np.ndarray, lam: np.ndarray) -> float:
+    """What multipliers below count as zero: 1e-9 of the forces at play (the generalized forces, the multipliers;
+    at least 1): the balls of a Newton's cradle at rest touch with forces of 1e-17, and are not pressed."""
+    f = rhs.c.eqs.evaluate(t, q, u, rhs.p)[1]
+    return 1e-9 * max(1.0, float(np.max(np.abs(f), initial=0.0)), float(np.max(np.abs(lam), initial=0.0)))
+
+
+def _soon(rhs, t: float, q: np.ndarray, u: np.ndarray, acc: np.ndarray, step: float) -> np.ndarray:
+    """The multipliers a moment dt later along the constrained motion (one Euler step, dt a thousandth of the
+    step size reached, 1e-6 s before any step): the sign of their rate where they are zero now."""
+    dt = 1e-3 * step if step > 0 else 1e-6
+    return rhs.accelerations(t + dt, q + dt * u, u + dt * acc)[1]
 
 
 def _lift_off_functions(rhs, c, p) -> list:
@@ -132,7 +156,8 @@ def integrate_with_impacts(job: Integration, y0: np.ndarray,
         touching0 = np.abs(gaps0) <= 1e-9 * (1 + np.max(np.abs(q0)))
         at_rest = [k for k in range(len(c.gap_names)) if k not in rhs.persistent and touching0[k]
                    and abs(vn0[k]) <= 1e-12 * max(1.0, np.max(np.abs(u0)))]
-        rhs.persistent.extend(_pressed(rhs, t, q0, u0, [k for k in at_rest if k not in released]))
+        rhs.persistent.extend(_pressed(rhs, t, q0, u0, [k for k in at_rest if k not in released], h))
+        rhs.rested.update(rhs.persistent)
         released = set()
         gap_events, open_events = [], []
         delta = 1e-8 * (1 + np.max(np.abs(q0)))
@@ -229,6 +254,7 @@ def integrate_with_impacts(job: Integration, y0: np.ndarray,
             lam = rhs.accelerations(t, q, u_new)[1][-len(trial):]
             if np.all(lam > 1e-12 * max(1.0, float(np.max(np.abs(lam))))):
                 captured = True
+                rhs.rested.update(trial)
             else:
                 del rhs.persistent[-len(trial):]
         for name in touching:

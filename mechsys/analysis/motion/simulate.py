@@ -286,6 +286,7 @@ class RightHandSide:
         self.window_front = None  # the front at the start of the current window of BUDGET_WINDOW evaluations
         self.slow_windows = 0  # consecutive windows at a pace that would overspend the budget
         self.persistent = []
+        self.rested: set[int] = set()  # gap contacts that were persistent at some time (the impact paths)
         self.progress = progress  # progress(t), called every 200 evaluations
         self.method: str | None = None  # the integrating method, for the budget's message (set by simulate)
 
@@ -682,6 +683,25 @@ def constraint_residual(c: Compiled, p: np.ndarray, grid: np.ndarray, q: np.ndar
                      for t, qi, ui in zip(grid, q, u)])
 
 
+def _frictionless_rest(model: MechanicalModel, c: Compiled, p: np.ndarray, rested: set[int]) -> list[str]:
+    """A warning naming the contacts with friction that came to rest: a resting contact carries no friction force
+    (docs/collide.md), so a block the file gives mu = 0.5 on a 20 degree incline slid at g sin(alpha) with nothing
+    said."""
+    import sympy as sp
+
+    gap_contacts = [entry for entry in model.kin.contacts if entry["gap"] is not None]
+    values = dict(zip(model.parameter_symbols, (float(x) for x in p)))
+    names = []
+    for k in sorted(rested):
+        mu = float(sp.sympify(gap_contacts[k].get("friction") or 0).xreplace(values))
+        if mu != 0:
+            names.append(f"'{c.gap_names[k]}' (friction {mu:g})")
+    if not names:
+        return []
+    return [f"contact {', '.join(names)} came to rest: a resting contact carries no friction force in simulate "
+            f"(friction acts in the impulses only, docs/collide.md), so the bodies slide freely along it"]
+
+
 def _refuse_singular_chart(c: Compiled, q: np.ndarray) -> None:
     """An error when the start is at a gimbal lock of a rotation chart. The runs that can re-chart start in another
     sequence (charted.py) and never get here at a lock; without constraints the singular mass matrix stops the
@@ -895,6 +915,7 @@ def integrate(model: MechanicalModel, options: SimulationOptions, overrides_p: n
         from mechsys.analysis.impact.impacts import integrate_with_impacts
 
         grid, Y, steps, impacts, _stopped = integrate_with_impacts(job, y0, capture_velocity)
+        warnings += _frictionless_rest(model, c, p, rhs.rested)
     elif c.m:
         grid, Y, steps = _closed_loop_scipy(job, y0)
     else:
