@@ -255,10 +255,13 @@ def sweep(model: MechanicalModel, name: str, start: float, stop: float, points: 
     samples = np.linspace(lo, hi, 5)  # branches born inside the range need a start of their own
 
     def multistart(k: int) -> list[np.ndarray] | str:
+        problem.undefined = False
         try:
-            return solve_equilibria(problem, par.at(samples[k]), search)
+            found = solve_equilibria(problem, par.at(samples[k]), search)
         except (ValueError, ArithmeticError) as exc:  # e.g. sqrt of a negative parameter: math domain error
             return str(exc)
+        # F and J answer NaN where a force is not defined; defined nowhere the search looked: no start here
+        return "a force is not defined there" if problem.undefined and not found else found
 
     continua: list[float] = []  # sample values with roots that are not isolated
     for p, found in zip(samples, fork_map(multistart, len(samples))):  # independent: one worker each

@@ -82,6 +82,9 @@ class EquilibriaResult:
         return equilibria_frame(self)
 
 
+#: what the generated code of the rest equations raises where a force is not defined (math.log(-1), 1/0)
+_UNDEFINED = (ValueError, ZeroDivisionError, OverflowError)
+
 #: functions whose derivative jumps or does not exist somewhere (EquilibriumProblem.non_smooth)
 #: and the reasons EquilibriumProblem.discontinuity gives
 _JUMPS = ("the forces at rest jump (a spring of zero length, a sign() law)", "the forces at rest are not defined nearby")
@@ -270,13 +273,23 @@ class EquilibriumProblem:
         return [self.fixed_rates[c] for c in self.fixed_rates]
 
     def F(self, z: np.ndarray, p: np.ndarray) -> np.ndarray:
-        return np.array(self._F(*z, *self.extra(), *p), dtype=float)
+        """The rest equations at z; NaN where a force is not defined there (log or sqrt of a negative number, a
+        division by zero: the generated code raises; the searches drop such starts)."""
+        try:
+            return np.array(self._F(*z, *self.extra(), *p), dtype=float)
+        except _UNDEFINED:
+            self.undefined = True
+            return np.full(self.residual_count, np.nan)
 
     def J(self, z: np.ndarray, p: np.ndarray) -> np.ndarray:
         n = len(self.unknowns)
         if n == 0:  # nothing to solve for (every coordinate cyclic with its rate fixed): sympy refuses jacobian([])
             return np.zeros((self.residual_count, 0))
-        return np.array(self._J(*z, *self.extra(), *p), dtype=float).reshape(self.residual_count, n)
+        try:
+            return np.array(self._J(*z, *self.extra(), *p), dtype=float).reshape(self.residual_count, n)
+        except _UNDEFINED:
+            self.undefined = True
+            return np.full((self.residual_count, n), np.nan)
 
     def Fp(self, z: np.ndarray, p: np.ndarray) -> np.ndarray:
         """dF/dp for every parameter (columns in model.parameter_symbols order)."""
@@ -290,6 +303,8 @@ class EquilibriumProblem:
 
     #: "compiled" when _newton runs numeric/newton.c for this problem (see compiled_newton), else "python"
     newton_path = "python"
+    #: set when F or J met a point where a force is not defined (the search's message says so)
+    undefined = False
 
     def is_angle(self) -> np.ndarray:
         mask = self.__dict__.get("_angle_mask")
@@ -479,11 +494,18 @@ def _polish(problem: EquilibriumProblem, z: np.ndarray, p: np.ndarray) -> np.nda
 
 
 def _is_root(problem: EquilibriumProblem, z: np.ndarray, p: np.ndarray) -> bool:
-    """F(z) vanishes to 1e-10 of the Jacobian's largest entry (at least 1): the acceptance of every root."""
+    """F(z) vanishes to 1e-10 of the Jacobian's largest entry (at least 1), and Newton's step from z is below 1e-4
+    (1 + |z|): the acceptance of every root. The step test drops the zeros at infinity of a force that only tends
+    to 0 (1/x at x = 1e20: F = 1e-20 passed, but Newton's step there doubles x)."""
     F = problem.F(z, p)
     J = problem.J(z, p)
-    scale = max(1.0, float(np.max(np.abs(J))))
-    return bool(np.all(np.isfinite(F)) and np.max(np.abs(F)) <= 1e-10 * scale)
+    scale = max(1.0, float(np.max(np.abs(J)))) if J.size else 1.0
+    if not (np.all(np.isfinite(F)) and np.all(np.isfinite(J)) and np.max(np.abs(F), initial=0.0) <= 1e-10 * scale):
+        return False
+    if not J.size:
+        return True
+    step = np.linalg.lstsq(J, -F, rcond=None)[0]
+    return bool(np.max(np.abs(step), initial=0.0) <= 1e-4 * (1 + float(np.max(np.abs(z), initial=0.0))))
 
 
 def settle(problem: EquilibriumProblem, z: np.ndarray, p: np.ndarray, max_steps: int = 400) -> np.ndarray | None:
@@ -643,14 +665,17 @@ def solve_equilibria(problem: EquilibriumProblem, p: np.ndarray, search: dict | 
         disk = _disk_key(problem, key)
         stored = _stored_search(problem, p, disk)
         if stored is None:
-            before = len(plan.outside)
+            before, was = len(plan.outside), problem.undefined
+            problem.undefined = False
             roots = _search(problem, p, plan, seed)
-            stored = (roots, plan.outside[before:])
+            stored = (roots, plan.outside[before:], problem.undefined)
+            problem.undefined = problem.undefined or was
             plan.outside = plan.outside[:before]  # added back below, as from the memo
             _store_search(disk, stored)
-        memo[key] = ([z.copy() for z in stored[0]], list(stored[1]))
-    roots, outside = memo[key]
+        memo[key] = ([z.copy() for z in stored[0]], list(stored[1]), stored[2])
+    roots, outside, undefined = memo[key]
     plan.outside += outside
+    problem.undefined = problem.undefined or undefined  # the search met points where a force is not defined
     return [z.copy() for z in roots]
 
 
@@ -682,8 +707,8 @@ def _disk_key(problem: EquilibriumProblem, key: tuple) -> str | None:
 
 
 def _stored_search(problem: EquilibriumProblem, p: np.ndarray, disk: str | None):
-    """(roots, outside) of a stored search, each root verified to be one (F = 0 as _polish accepts it); None when
-    absent or when anything in it does not verify."""
+    """(roots, outside, whether it met undefined forces) of a stored search, each root verified to be one (F = 0 as
+    _polish accepts it); None when absent or when anything in it does not verify."""
     from mechsys.numeric import cache
 
     entry = cache.load(disk) if disk is not None else None
@@ -692,6 +717,9 @@ def _stored_search(problem: EquilibriumProblem, p: np.ndarray, disk: str | None)
     try:
         roots = [np.array(r, dtype=float) for r in entry["roots"]]
         outside = [str(x) for x in entry["outside"]]
+        undefined = entry["undefined"]
+        if not isinstance(undefined, bool):
+            return None
         for z in roots:
             if z.shape != (len(problem.unknowns),) or not np.all(np.isfinite(z)):
                 return None
@@ -701,14 +729,15 @@ def _stored_search(problem: EquilibriumProblem, p: np.ndarray, disk: str | None)
                 return None
     except (KeyError, TypeError, ValueError, ArithmeticError):
         return None
-    return roots, outside
+    return roots, outside, undefined
 
 
-def _store_search(disk: str | None, stored: tuple[list[np.ndarray], list[str]]) -> None:
+def _store_search(disk: str | None, stored: tuple[list[np.ndarray], list[str], bool]) -> None:
     from mechsys.numeric import cache
 
     if disk is not None:
-        cache.store(disk, {"roots": [[float(x) for x in z] for z in stored[0]], "outside": list(stored[1])})
+        cache.store(disk, {"roots": [[float(x) for x in z] for z in stored[0]], "outside": list(stored[1]),
+                           "undefined": bool(stored[2])})
 
 
 def _search(problem: EquilibriumProblem, p: np.ndarray, plan: SearchReport, seed: int) -> list[np.ndarray]:
@@ -885,11 +914,15 @@ def find_equilibria(model: MechanicalModel, search: dict[str, tuple[float, float
     equilibria = [problem.equilibrium(z) for z in isolated]
     assess_all(problem, equilibria, p)
     equilibria, chart_note = (review if model.is_holonomic else mark_unchartable)(problem, equilibria, p)
-    message = "; ".join(m for m in (message, chart_note, singular_note(problem, dropped)) if m)
+    undefined = ("the forces are not defined at some points the search met (a log or square root of a negative "
+                 "number, a division by zero): no root is found there or at the edge of their domain"
+                 if problem.undefined else "")
+    message = "; ".join(m for m in (message, chart_note, singular_note(problem, dropped), undefined) if m)
     equilibria.sort(key=lambda e: tuple(e.coordinates.values()) + tuple(e.rates.values()))
     if not equilibria:
         message = (f"no equilibrium found: {plan.text()}; widen it with --search" if plan is not None
                    else "no equilibrium: the equations have no real root (exhaustive search)")
+        message = "; ".join(m for m in (message, undefined) if m)
     split = getattr(problem, "split", None)
     return EquilibriaResult(equilibria, message, problem.cyclic, dict(problem.fixed_rates), plan, exact,
                             split.text() if split is not None else "", problem)

@@ -234,8 +234,7 @@ def vibration_modes(model: MechanicalModel, at: dict[str, float] | None = None,
         w2, phi = sla.eigh(Ks, red.M)
     except (np.linalg.LinAlgError, ValueError):
         raise AnalysisError("the reduced mass matrix is not positive definite") from None
-    top = max(1.0, float(np.max(np.abs(w2)))) if w2.size else 1.0
-    rigid = [bool(abs(x) <= RIGID * top) for x in w2]
+    rigid = [bool(abs(x) <= RIGID * _omega2_scale(w2, Ks, red.M)) for x in w2]
     unstable = int(sum(1 for x, r in zip(w2, rigid) if x < 0 and not r))
     freqs = np.sqrt(np.clip(w2, 0.0, None))
     freqs[rigid] = 0.0
@@ -261,6 +260,16 @@ def vibration_modes(model: MechanicalModel, at: dict[str, float] | None = None,
                 zeta[k] = 0.0
     names = list(lin.coordinates)
     return Modes(names, e, freqs, shapes, rigid, zeta, vals, condensed, unstable, red, note, _coupling(red, vals))
+
+
+def _omega2_scale(w2: np.ndarray, K: np.ndarray, M: np.ndarray) -> float:
+    """The size rigid-body modes are measured against: the largest |w^2|, or the stiffness over the mass
+    (max|K| / max|M|) if that is larger, in the model's own units. It was max(1, max|w^2|): a mass of 1 on a spring
+    of 1e-9 (w = 3.2e-5 rad/s) was called a rigid-body mode."""
+    if not w2.size:
+        return 0.0
+    mass = float(np.max(np.abs(M)))
+    return max(float(np.max(np.abs(w2))), float(np.max(np.abs(K))) / mass if mass > 0 else 0.0)
 
 
 def _coupling(red: ReducedSystem, eigenvalues: np.ndarray) -> str:
