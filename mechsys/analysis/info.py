@@ -38,6 +38,54 @@ def _matrices(model: MechanicalModel):
     return matrix_from_source(desc["A"]), matrix_from_source(desc["M"])
 
 
+def _at(model: MechanicalModel, states: list, p: list[float]) -> tuple[list, list]:
+    """A and M at the states: over the DAGs, else compiled."""
+    evaluated = _evaluated(model, states, p)
+    if evaluated is None:
+        A_fn, M_fn = _matrices(model)
+        evaluated = ([A_fn(t, q, u, p) for t, q, u in states], [M_fn(t, q, u, p) for t, q, u in states])
+    return evaluated
+
+
+def _near_initial(model: MechanicalModel, states: list) -> list:
+    """Sample states around the file's initial configuration (the first at it, the others 1e-3 (1 + |q|) away):
+    a closed loop's constraints may have several branches of different rank (a parallelogram with a redundant bar
+    moves on its parallelogram branch, DOF 1, but is rigid on the crossed one), and the file's configuration names
+    the branch. The times and rates stay those of ``states``."""
+    q0 = np.array([model.doc.initial.get(c, 0.0) for c in model.coordinates], dtype=float)
+    rng = np.random.default_rng(11)
+    return [(t, q0 + (0.0 if k == 0 else 1e-3 * (1 + np.abs(q0)) * rng.uniform(-1, 1, len(q0))), u)
+            for k, (t, _q, u) in enumerate(states)]
+
+
+def _onto_constraints(model: MechanicalModel, states: list, p: list[float]) -> list | None:
+    """The sample states with their coordinates moved onto the holonomic constraints (Gauss-Newton on Phi = 0 with
+    its Jacobian, the holonomic rows of A), those that get there; the states as they are without holonomic
+    constraints; None when an entry cannot be evaluated over the DAG. The ranks are those of configurations the
+    mechanism can take: off the constraints a parallelogram with a redundant third bar had rank 4 (DOF 0, nothing
+    redundant), on them rank 3 (DOF 1, one redundant row)."""
+    rows = [i for i, c in enumerate(model.kin.constraints) if c.kind == "holonomic"]
+    if not rows:
+        return states
+    phi, jac = model.holonomic_constraints, model.constraint_jacobian[rows, :]
+    out = []
+    for t, q, u in states:
+        q = np.array(q, dtype=float)
+        for _ in range(50):
+            point = Evaluation({model.t: t, **dict(zip(model.q, q)), **dict(zip(model.parameter_symbols, p))})
+            values = [point.of(e) for e in phi]
+            slopes = [point.of(e) for e in jac]
+            if None in values or None in slopes:
+                return None
+            r = np.array([v for v, _ in values], dtype=float)
+            if np.max(np.abs(r)) <= 1e-12 * (1 + np.max(np.abs(q))):
+                out.append((t, q, u))
+                break
+            J = np.array([v for v, _ in slopes], dtype=float).reshape(len(rows), len(q))
+            q = q - np.linalg.lstsq(J, r, rcond=None)[0]
+    return out
+
+
 def _evaluated(model: MechanicalModel, states: list, p: list[float]) -> tuple[list, list] | None:
     """A and M at the states in floating point, over their expression DAGs (dag.Evaluation: each shared node once;
     three states need no compiled code: the 80-link chain's M took 22 s to generate and compile); None when an
@@ -64,19 +112,25 @@ def system_info(model: MechanicalModel) -> Info:
     prescribed = list(model.prescribed)
     params = model.parameter_symbols
     p = [model.parameters[s.name] for s in params]
-    states = random_states(model, 3, seed=7)
-    evaluated = _evaluated(model, states, p)
-    if evaluated is None:
-        A_fn, M_fn = _matrices(model)
-        evaluated = ([A_fn(t, q, u, p) for t, q, u in states], [M_fn(t, q, u, p) for t, q, u in states])
-    As, Ms = evaluated
+    states = random_states(model, 3, seed=7)  # M (massless coordinates) at configurations in general position
+    notes = []
+    ranked = states  # A at configurations the mechanism can take
+    if model.kin.constraints:
+        assembled = _onto_constraints(model, _near_initial(model, states), p)
+        if assembled:
+            ranked = assembled
+        elif assembled is not None:
+            notes.append("the closed-loop constraints could not be met near the initial configuration (can the loop "
+                         "be assembled?): the ranks are those of configurations off the constraints")
+    As, Ms = _at(model, states, p)
+    if ranked is not states:
+        As = _at(model, ranked, p)[0]
     hol = [i for i, c in enumerate(kin.constraints) if c.kind == "holonomic"]
     rank = max(_rank(A) for A in As)
     hol_rank = max(_rank(A[hol, :]) for A in As) if hol else 0
     nfree = len(model.q)
     dof = nfree - rank
     massless = []
-    notes = []
     if nfree:
         if not all(np.all(np.isfinite(M)) for M in Ms):
             raise AnalysisError("the mass matrix is not finite at sample states (an overflow or a division by zero: "
