@@ -73,3 +73,28 @@ constraints:
 forces:
   - {type: gravity, acceleration: [0, -g, 0]}
 """
+
+
+def test_a_locked_configuration_is_stable_not_asymptotically(tmp_path):
+    """An equilibrium whose linearization has no degree of freedom (the constraints lock it) was 'asymptotically
+    stable: all eigenvalues have negative real parts', true only for want of any eigenvalue."""
+    import numpy as np
+
+    import mechsys
+    from mechsys.analysis.equilibrium.equilibria import Equilibrium, EquilibriumProblem
+    from mechsys.analysis.equilibrium.stability import LOCKED, assess
+    from mechsys.numeric.parameters import parameter_values
+
+    path = tmp_path / "locked.yaml"  # a pendulum pinned at its tip to a ground point: no motion left
+    path.write_text("name: locked\nparameters: {m: 1, l: 1, g: 9.81}\ncoordinates:\n  th: {initial: 0}\nground:\n"
+                    "  points: {P: [l, 0, 0]}\nlinks:\n  rod:\n"
+                    "    joint: {type: revolute, parent: ground, axis: z, coordinate: th}\n    mass: m\n"
+                    "    center_of_mass: [l/2, 0, 0]\n    points: {tip: [l, 0, 0]}\n"
+                    "constraints:\n  - {type: point_on_point, name: pin, points: [rod.tip, ground.P]}\n"
+                    "forces:\n  - {type: gravity, acceleration: [0, -g, 0]}\n")
+    model = mechsys.load(path)
+    problem = EquilibriumProblem(model)
+    p = parameter_values(model)
+    e = Equilibrium({"th": 0.0}, {}, [0.0, 0.5 * 9.81])
+    assess(problem, e, p)
+    assert len(e.eigenvalues) == 0 and e.stability == "stable" and e.reason == LOCKED and not e.critical

@@ -143,6 +143,11 @@ def assess_all(problem: EquilibriumProblem, equilibria: list, p: np.ndarray) -> 
             assess(problem, e, p)
 
 
+#: the verdict's reason where the linearization has no degree of freedom
+LOCKED = ("no motion: the constraints leave no degree of freedom at this configuration (it is locked), so nothing "
+          "moves away from it; not asymptotic, there being nothing to decay")
+
+
 def assess(problem: EquilibriumProblem, e: Equilibrium, p: np.ndarray) -> None:
     """Fill eigenvalues, Jacobian and verdict of equilibrium ``e`` in place."""
     if hasattr(problem, "assess"):
@@ -178,6 +183,10 @@ def assess(problem: EquilibriumProblem, e: Equilibrium, p: np.ndarray) -> None:
         return
     vals, J = eigen(A, B)
     e.eigenvalues, e.jacobian = vals, J
+    if not len(vals):  # not 'all eigenvalues have negative real parts', which held only for want of any
+        e.critical = False
+        e.stability, e.reason = "stable", LOCKED
+        return
     scale = max(1.0, float(np.max(np.abs(vals)))) if len(vals) else 1.0
     tol = ZERO_RE * scale
     e.critical = bool(len(vals) and np.min(np.abs(vals.real)) <= tol)
