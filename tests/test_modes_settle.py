@@ -172,3 +172,6 @@ def test_a_steady_motion_says_its_frequencies_are_the_eigenvalues():
     assert data["coupling"].startswith("gyroscopic terms couple the coordinates")
     assert f"|Im λ| = {true:.7g} rad/s" in data["coupling"]
     assert "coupling" not in _modes_json(ROOT / "systems" / "spring_chain.yaml")
+    arm = _modes_json(ROOT / "systems" / "motor_arm.yaml")  # docs/modes.md §5: 6.24724 in the table, 9.247141 in fact
+    assert [round(mode["frequency_rad_s"], 5) for mode in arm["modes"]] == [0.0, 6.24724]
+    assert "|Im λ| = 9.247141 rad/s" in arm["coupling"]
