@@ -178,6 +178,8 @@ def test_a_build_started_early_gives_the_library_built_late(monkeypatch, tmp_pat
     import tempfile
 
     monkeypatch.setattr(tempfile, "tempdir", None)
+    native._abandon()  # builds other tests of this worker left (the assertions below are about this test's own)
+
     def fresh(name):  # not the session's shared models: this test sets their compiled code
         return mechsys.load(SYSTEMS_DIR / f"{name}.yaml")
 
@@ -480,3 +482,16 @@ def test_outputs_that_are_numbers_are_filled_in_not_stored_one_by_one(tmp_path):
     x, v, c = 0.3, -1.7, 2.0
     expected = [0.0, 1.0, -1.0, v * x, 0.0, 2.5, 0.5, math.sin(x) + c, 0.0, math.sin(x) * v, 0.0, x + v]
     assert out.tolist() == expected
+
+
+def test_a_run_that_fails_before_integrating_leaves_no_build(monkeypatch, tmp_path):
+    """simulate starts the native build before it assembles the start; a start it refuses (a closed loop that
+    cannot be assembled) stops the build and removes its files instead of leaving them to the process's exit."""
+    monkeypatch.setenv("MECHSYS_CACHE", str(tmp_path / "cache"))
+    native._abandon()
+    from mechsys.errors import AnalysisError
+
+    broken = mechsys.load(SYSTEMS_DIR / "four_bar.yaml", {"l1": 5.0, "theta2": 0.1, "theta3": 0.1, "theta4": 0.1})
+    with pytest.raises(AnalysisError):  # a ground link of 5 m: the loop cannot close
+        simulate(broken, 0.1)
+    assert not native._UNFINISHED and not hasattr(broken, "_native_pending")

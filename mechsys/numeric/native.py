@@ -504,6 +504,18 @@ def _abandon() -> None:
     _UNFINISHED.clear()
 
 
+def abandon(model: MechanicalModel) -> None:
+    """Stop the build start() began for this model and remove its files, if load() has not taken it: a run that
+    fails before integrating (a start the constraints cannot assemble, at a gimbal lock) leaves none behind, in
+    this process either (tests run many commands in one)."""
+    held = model.__dict__.pop("_native_pending", None)
+    if held is not None:
+        _key, tmp, pending = held
+        _UNFINISHED.pop(id(pending), None)
+        pending.cancel()
+        tmp.cleanup()
+
+
 def _native_key(model) -> str:
     from mechsys.numeric import cache
 

@@ -596,11 +596,14 @@ def native_integrator(model: MechanicalModel, c: Compiled, required: bool) -> Na
     elif native.compiler() is None:
         why = "no C compiler is available (set CC) or MECHSYS_NATIVE=off"
     if why is not None:
+        native.abandon(model)
         if required:
             raise AnalysisError(f"--method native: {why}; use DOP853")
         return None
     if getattr(c, "native", None) is None:  # kept with the compiled code, which with_overrides clones share
         c.native = native.load(model)
+    else:
+        native.abandon(model)  # a clone's own build, started before its compiled code was found shared
     return c.native
 
 
@@ -847,11 +850,17 @@ def integrate(model: MechanicalModel, options: SimulationOptions, overrides_p: n
         from mechsys.numeric import native
 
         native.start(model)  # the integrator compiles (its own process) while compile_model generates Python
-    c = compile_model(model)
-    timings["derive + compile" if not getattr(c, "cache_hit", False) else "load compiled code (cached)"] = \
-        time.perf_counter() - t0
-    p = parameter_values(model) if overrides_p is None else overrides_p
-    q0, u0, warnings = _start(model, c, p)
+    try:
+        c = compile_model(model)
+        timings["derive + compile" if not getattr(c, "cache_hit", False) else "load compiled code (cached)"] = \
+            time.perf_counter() - t0
+        p = parameter_values(model) if overrides_p is None else overrides_p
+        q0, u0, warnings = _start(model, c, p)
+    except BaseException:
+        from mechsys.numeric import native
+
+        native.abandon(model)  # the build started above, which nothing will take now
+        raise
     y0 = np.concatenate([q0, u0])
     rhs = RightHandSide(c, p, progress, EVALUATIONS_PER_STEP * max_steps)
     rhs.horizon = float(t_end)
