@@ -192,6 +192,30 @@ def test_bomb_in_set_is_an_input_error(tmp_path, bomb, fragment):
     assert len(line) < 250  # the 3000-character item is shortened in the message
 
 
+@pytest.mark.parametrize("text, value", [("1e-300", 1e-300), ("2.5e120", 2.5e120), ("-1.5E-200", -1.5e-200),
+                                         ("0e-500", 0.0)])
+def test_literals_beyond_exact_range_are_floats(text, value):
+    parsed = parse_expression(text, SYMS)
+    assert float(parsed) == value
+    assert parsed.is_Float or parsed == 0
+
+
+@pytest.mark.parametrize("text", ["1e400", "1e-320"])
+def test_literals_beyond_a_double_are_refused(text):
+    with pytest.raises(ExpressionError, match="out of range"):
+        parse_expression(text, SYMS)
+
+
+def test_set_reads_values_as_expressions(tmp_path):
+    """--set a=0.1 is the exact 1/10, like "0.1" in the file; 1e-300 is the float (yaml-reference 3.1, 14)."""
+    path = tmp_path / "model.yaml"
+    path.write_text(MODEL.format(k=100), encoding="utf-8")
+    assert read_document(path, overrides={"k": "0.1"}).parameter_exprs["k"] == sp.Rational(1, 10)
+    assert read_document(path, overrides={"k": "1e-300"}).parameter_values["k"] == 1e-300
+    result = runner.invoke(app, ["info", str(path), "--set", "k=1e-300"])
+    assert result.exit_code == 0, result.stderr
+
+
 # ----------------------------------------------------------------------------------------- parameter chains
 def chain_file(tmp_path: Path, n: int, ring: bool = False) -> Path:
     lines = ["name: chain", "parameters:", f"  p0: {f'p{n - 1}+1' if ring else 1}"]

@@ -4,6 +4,7 @@ from __future__ import annotations
 import difflib
 import math
 import re
+import sys
 from dataclasses import dataclass
 from fractions import Fraction
 from typing import Callable, Mapping, Protocol
@@ -93,10 +94,16 @@ def _number(text: str, pos: int = 0) -> sp.Expr:
     mantissa, _, exp10 = text.lower().partition("e")
     if len(mantissa.replace(".", "")) > _MAX_DIGITS:
         raise ExpressionError(f"number literal longer than {_MAX_DIGITS} digits", pos)
-    # 1e999999999 (or 1e-999999999) would be an exact number of a billion digits: bound it before building it
+    # 1e999999999 (or 1e-999999999) would be an exact number of a billion digits: bound it before building it.
+    # A literal beyond exact range but within a double's (1e-300, 2.5e120) is the binary float it reads as.
     if exp10 and (len(exp10) > 6 or abs(int(exp10)) > _MAX_DIGITS):
-        raise ExpressionError(f"number {text!r} out of range (an exact number has at most {_MAX_DIGITS} digits)",
-                              pos)
+        if not any(ch in "123456789" for ch in mantissa):
+            return sp.Integer(0)
+        value = float(text) if len(exp10) <= 6 else math.inf
+        if not sys.float_info.min <= abs(value) < math.inf:
+            raise ExpressionError(f"number {text!r} out of range (an exact number has at most {_MAX_DIGITS} digits, "
+                                  f"a float lies within {sys.float_info.min:.1e} to {sys.float_info.max:.1e})", pos)
+        return sp.Float(text)
     if re.fullmatch(r"\d+", text):
         return sp.Integer(int(text))
     # Decimal literals become exact rationals so textbook formulas stay exact.
