@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import sympy as sp
 
+from mechsys.analysis.equilibrium import loops
 from mechsys.errors import AnalysisError, InputError
 from mechsys.mechanics.dag import Substitution
 from mechsys.mechanics.model import INTERNAL_METHOD, MechanicalModel
@@ -42,6 +43,7 @@ class Equilibrium:
     critical: bool = False
     reason: str = ""
     chart: str = ""  # why the coordinates are a singular chart here ('' where they are regular): charts.py
+    branch: str = ""  # why the closed loops are at a singular configuration here ('' where they are not): loops.py
     structural: str = ""  # zero eigenvalues reported apart (nonholonomic: ignorable coordinates, families)
     accelerations: dict[str, float] = field(default_factory=dict)  # of dependent ignorable speeds (nonholonomic)
 
@@ -188,7 +190,7 @@ class EquilibriumProblem:
     def start(self, start: np.ndarray, p: np.ndarray) -> np.ndarray:
         """The Newton start from drawn coordinates and rates: onto the constraints, the steady rates solved where
         they enter linearly, the multipliers by least squares."""
-        start = self.solve_rates(_onto_constraints(self, start, p), p)
+        start = self.solve_rates(loops.onto_constraints(self, start, p), p)
         return np.concatenate([start, _multiplier_guess(self, start, p)])
 
     def solve_rates(self, start: np.ndarray, p: np.ndarray) -> np.ndarray:
@@ -496,7 +498,9 @@ def _polish(problem: EquilibriumProblem, z: np.ndarray, p: np.ndarray) -> np.nda
 def _is_root(problem: EquilibriumProblem, z: np.ndarray, p: np.ndarray) -> bool:
     """F(z) vanishes to 1e-10 of the Jacobian's largest entry (at least 1), and Newton's step from z is below 1e-4
     (1 + |z|): the acceptance of every root. The step test drops the zeros at infinity of a force that only tends
-    to 0 (1/x at x = 1e20: F = 1e-20 passed, but Newton's step there doubles x)."""
+    to 0 (1/x at x = 1e20: F = 1e-20 passed, but Newton's step there doubles x). An F above rounding (1e-13 of
+    that scale) must also be one Newton's linear model can reduce: near a loop's dead point the multipliers reach
+    1e4 and J's scale with them, and Newton stalls at |F| ~ 1e-7 where J is singular, in no root's basin."""
     F = problem.F(z, p)
     J = problem.J(z, p)
     scale = max(1.0, float(np.max(np.abs(J)))) if J.size else 1.0
@@ -505,6 +509,8 @@ def _is_root(problem: EquilibriumProblem, z: np.ndarray, p: np.ndarray) -> bool:
     if not J.size:
         return True
     step = np.linalg.lstsq(J, -F, rcond=None)[0]
+    if np.max(np.abs(F)) > 1e-13 * scale and np.linalg.norm(F + J @ step) > 0.25 * np.linalg.norm(F):
+        return False  # above rounding, and no step reduces F: a minimum of |F| where J is singular, not a zero
     return bool(np.max(np.abs(step), initial=0.0) <= 1e-4 * (1 + float(np.max(np.abs(z), initial=0.0))))
 
 
@@ -784,7 +790,7 @@ def drop_singular(problem: EquilibriumProblem, roots: list[np.ndarray], p: np.nd
     added to ``dropped`` by reason (see singular_note)."""
     kept = []
     for z in roots:
-        why = problem.split_singularity(z, p) or problem.discontinuity(z, p)
+        why = problem.split_singularity(z, p) or problem.discontinuity(z, p) or loops.unbalanced(problem, z, p)
         if why is None:
             kept.append(z)
         elif dropped is not None:
@@ -798,6 +804,10 @@ def singular_note(problem: EquilibriumProblem, dropped: dict[str, list[np.ndarra
     for why, zs in dropped.items():
         where = ", ".join(f"{c} = {wrap(v) if problem.angles.get(c, False) else v:.6g}"
                           for c, v in zip(problem.free, zs[0]))
+        if why == loops.UNBALANCED:
+            notes.append(f"{len(zs)} root(s) where {why} (e.g. {where}) are not rests: the multipliers grow without "
+                         f"bound there and F vanishes only to their rounding; not {what}")
+            continue
         kind = "points where the equations of motion are not smooth" if why in _JUMPS else \
             "coordinate singularities of the model"
         notes.append(f"{len(zs)} root(s) where {why} (e.g. {where}) are {kind}, not steady motions one can "
@@ -812,27 +822,6 @@ def is_new_root(problem: EquilibriumProblem, z: np.ndarray, roots: list[np.ndarr
         return True
     size = float(np.linalg.norm(z[: problem.nq + len(problem.rate_unknowns)]))
     return not bool(np.any(problem.distances(z, np.asarray(roots)) < 1e-7 * (1 + size)))
-
-
-def _onto_constraints(problem: EquilibriumProblem, start: np.ndarray, p: np.ndarray) -> np.ndarray:
-    """The start moved onto the constraint manifold Phi(q) = 0 by minimum-norm Gauss-Newton (the start itself
-    without constraints, or when that fails). A random point of the box lies far from every assembly branch of a
-    closed loop, and the full Newton from there mostly stagnates (Andrews' squeezer: 92% of the starts); from
-    its projection it reaches an equilibrium, and the projections visit every assembly mode."""
-    if not problem.m:
-        return start
-    nq, m = problem.nq, problem.m
-    q = start.copy()
-    for _ in range(30):
-        z = np.concatenate([q, np.zeros(m)])
-        phi = problem.F(z, p)[-m:]
-        A = problem.J(z, p)[-m:, :nq]
-        if not (np.all(np.isfinite(phi)) and np.all(np.isfinite(A))):
-            return start
-        if np.max(np.abs(phi)) <= 1e-12 * max(1.0, float(np.max(np.abs(A)))):
-            return q
-        q[:nq] = q[:nq] + np.linalg.lstsq(A, -phi, rcond=None)[0]
-    return start
 
 
 def _multiplier_guess(problem: EquilibriumProblem, start: np.ndarray, p: np.ndarray) -> np.ndarray:
@@ -898,7 +887,7 @@ def find_equilibria(model: MechanicalModel, search: dict[str, tuple[float, float
     from mechsys.analysis.equilibrium.charts import mark_unchartable, review
 
     dropped: dict[str, list[np.ndarray]] = {}
-    roots = drop_singular(problem, roots, p, dropped)
+    roots = loops.merge_branch_points(problem, drop_singular(problem, roots, p, dropped), p)
     message = ""
     isolated = []
     family = None
@@ -913,6 +902,10 @@ def find_equilibria(model: MechanicalModel, search: dict[str, tuple[float, float
                    "one representative of the continuum is shown")
     equilibria = [problem.equilibrium(z) for z in isolated]
     assess_all(problem, equilibria, p)
+    for z, e in zip(isolated, equilibria):
+        e.branch = loops.branch_point(problem, z, p) or ""
+        if e.branch:
+            e.stability, e.critical, e.reason = "undecided", False, e.branch
     equilibria, chart_note = (review if model.is_holonomic else mark_unchartable)(problem, equilibria, p)
     undefined = ("the forces are not defined at some points the search met (a log or square root of a negative "
                  "number, a division by zero): no root is found there or at the edge of their domain"
@@ -929,12 +922,20 @@ def find_equilibria(model: MechanicalModel, search: dict[str, tuple[float, float
 
 
 def is_isolated(problem: EquilibriumProblem, z: np.ndarray, p: np.ndarray) -> bool:
-    """The root z is isolated: its Jacobian (unit columns and rows) has full rank, or its rank loss is a gimbal
-    lock of the chart (charts.py), not a continuum of steady motions (a free heading, a free rigid-body motion)."""
+    """The root z is isolated: its Jacobian (unit columns and rows) has no null direction that moves the coordinates
+    or rates (one of the multipliers alone is a redundant constraint row), or its rank loss is a gimbal lock of the
+    chart (charts.py), not a continuum of steady motions (a free heading, a free rigid-body motion)."""
     from mechsys.analysis.equilibrium.charts import singularities
 
-    sv = np.linalg.svd(_equilibrated(problem.J(z, p)), compute_uv=False)
-    return not (sv.size and sv[-1] <= 1e-9 * max(1.0, sv[0])) or \
+    J = _equilibrated(problem.J(z, p))
+    if not J.size:
+        return True
+    _, sv, Vt = np.linalg.svd(J)
+    sv = np.concatenate([sv, np.zeros(J.shape[1] - sv.size)])
+    null = Vt[sv <= 1e-9 * max(1.0, sv[0])]
+    # a null direction of the multipliers alone is a redundant constraint row (lambda not unique), not a continuum
+    moves = null[:, : problem.nq + len(problem.rate_unknowns)]
+    return not (moves.size and np.linalg.norm(moves, 2) > 1e-6) or \
         bool(singularities(problem.model, problem.equilibrium(z).coordinates, p))
 
 

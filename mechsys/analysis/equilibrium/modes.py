@@ -7,6 +7,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import scipy.linalg as sla
 
+from mechsys.analysis.equilibrium import loops
 from mechsys.analysis.equilibrium.equilibria import (Equilibrium, EquilibriumProblem, _polish, find_equilibria,
                                                       is_isolated, settle)
 from mechsys.numeric.parameters import parameter_values
@@ -133,10 +134,14 @@ def _settled(model: MechanicalModel) -> Equilibrium | None:
 
 
 def _regular(res, kind: str) -> list[Equilibrium]:
-    """The equilibria found that are not at a singular point of a rotation chart (charts.py); none: an error."""
-    regular = [e for e in res.equilibria if not e.chart]
+    """The equilibria found that are not at a singular point of a rotation chart (charts.py) or of the closed loops
+    (loops.py); none: an error."""
+    regular = [e for e in res.equilibria if not (e.chart or e.branch)]
     if not regular:
-        raise AnalysisError(f"every {kind} found is at a {res.equilibria[0].chart}: the linearization in these "
+        first = res.equilibria[0]
+        if first.branch:
+            raise AnalysisError(f"every {kind} found is {first.branch}; give another with --at")
+        raise AnalysisError(f"every {kind} found is at a {first.chart}: the linearization in these "
                             "coordinates is singular; write the joint with another sequence")
     return regular
 
@@ -169,6 +174,9 @@ def _equilibrium(model: MechanicalModel, at: dict[str, float] | None) -> tuple[E
 
     e = problem.equilibrium(z)
     _refuse_singular(model, e, p)
+    branch = loops.branch_point(problem, z, p)
+    if branch:
+        raise AnalysisError(f"--at is {branch}")
     assess(problem, e, p)
     return e, ""
 
