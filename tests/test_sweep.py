@@ -198,6 +198,20 @@ def test_failing_tasks_are_recorded_not_fatal(tmp_path):
     assert json.loads(r.stdout)["skipped"] == 1 and json.loads(r.stdout)["failed"] == 2
 
 
+def test_a_task_decides_cyclic_coordinates_at_its_own_values(tmp_path):
+    """At m = 0 the rod's angle beta feels no force, so it is cyclic; the task at m = 1 in the same worker took that
+    decision over (a with_overrides copy shared it) and vibrated about a wrong steady motion: damping ratio -402,
+    6.46 rad/s, status ok. Each task now equals the model loaded fresh at its values."""
+    out = tmp_path / "modes.csv"
+    r = invoke(SYSTEMS / "motor_arm.yaml", "--param", "m=0:1:2", "--run", "modes", "--jobs", 1, "-o", out)
+    assert r.exit_code == 0, r.output + r.stderr
+    row = read(out)[1]
+    fresh = run_task(str(SYSTEMS / "motor_arm.yaml"), "modes", {"m": 1.0})
+    assert row["status"] == "ok"
+    for key in ("mode1.frequency", "mode2.frequency", "mode1.damping_ratio", "mode2.damping_ratio"):
+        assert float(row[key]) == pytest.approx(fresh[key], rel=1e-12, abs=1e-12), key
+
+
 def test_every_task_failing_exits_1(tmp_path):
     out = tmp_path / "bad.csv"
     r = invoke(SYSTEMS / "motor_arm.yaml", "--param", "Mo=1:2:2", "--run", "simulate", "--option", "method=Euler",

@@ -24,6 +24,10 @@ METHODS = ("lagrange", "kane")
 #: derivatives of the energy, 4x cheaper on the bicycle and 60x on a 20-link chain; the same decisions as Lagrange
 #: on every bundled and test model. `derive --method` still chooses what is printed.
 INTERNAL_METHOD = "kane"
+#: What a model decides at its parameter values and keeps in its __dict__: a with_overrides copy (a sweep's task)
+#: decides them again. A rod of mass 0 leaves its angle free of every force, so cyclic; the copy of mass 1 took
+#: that decision over and vibrated about a wrong steady motion (damping ratio -402).
+VALUE_DEPENDENT = ("cyclic_decision", "_autonomous")
 
 
 @dataclass
@@ -138,6 +142,8 @@ class MechanicalModel:
             return MechanicalModel(doc)  # these values change the structure (a constraint row vanishes or not)
         clone = copy.copy(self)
         clone.doc = doc
+        for name in VALUE_DEPENDENT:  # decided at the parameter values: decided again at the clone's
+            clone.__dict__.pop(name, None)
         return clone
 
     def _repr_markdown_(self) -> str:

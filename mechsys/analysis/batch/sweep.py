@@ -268,13 +268,13 @@ class _Base:
     def adopt(self, clone) -> None:
         """Keep on the base what a task compiled or derived on its copy (symbolic expressions and compiled
         code, never numbers: those live in the copy's document), so the next copy starts with it."""
-        from mechsys.mechanics.model import MechanicalModel
+        from mechsys.mechanics.model import VALUE_DEPENDENT, MechanicalModel
 
         if clone.kin is not self.model.kin:
             return  # these values changed the structure: the clone was built anew and shares nothing
         base = self.model.__dict__
         for name, value in clone.__dict__.items():
-            if name in base or name == "doc":
+            if name in base or name == "doc" or name in VALUE_DEPENDENT:
                 continue
             if name in ("_simulation_compiled", "_linear_pieces") or isinstance(
                     getattr(MechanicalModel, name, None), cached_property):
