@@ -861,6 +861,11 @@ def collide(
             joints.add(name, *vec)
         energy = Table("kinetic energy", ["before", "after", "lost"])
         energy.add(result.energy_before, result.energy_after, result.energy_loss)
+        if result.further:
+            verb = "touches and approaches" if len(result.further) == 1 else "touch and approach"
+            energy.notes.append(f"after this impact {', '.join(result.further)} {verb}: further impacts follow at "
+                                "the same instant (resolve again from the rates after, or run `mechsys simulate`, "
+                                "which chains them)")
         tables = [rates, contacts, joints, energy]
         if result.restitution_factor < 1:
             note = Table("restitution lowered (friction would otherwise create energy)", ["factor on e"])

@@ -32,6 +32,7 @@ class ImpactResult:
     tangential_impulses: np.ndarray | None = None  # (contacts, 3): friction impulse on the first side, ground axes
     modes: list[str | None] = field(default_factory=list)  # "stick" | "slip" per contact; None without impulse
     restitution_factor: float = 1.0  # < 1 when e was lowered so that friction does not create energy
+    further: list[str] = field(default_factory=list)  # touching contacts that approach after it: impacts to come
 
     @property
     def energy_loss(self) -> float:
@@ -50,7 +51,8 @@ class ImpactResult:
                 "normal_velocity_before": [float(x) for x in self.normal_velocity_before],
                 "normal_velocity_after": [float(x) for x in self.normal_velocity_after],
                 "joint_impulses": self.joint_impulses, "energy_loss": self.energy_loss,
-                "energy_before": self.energy_before, "energy_after": self.energy_after}
+                "energy_before": self.energy_before, "energy_after": self.energy_after,
+                "further_impacts": list(self.further)}
 
     def _tangential(self) -> np.ndarray:
         if self.tangential_impulses is None:
@@ -77,6 +79,9 @@ class ImpactModel:
         rows = [k for k, c in enumerate(model.kin.constraints) if not c.name.startswith("drive(")]
         self.A = compile_matrix(model.constraint_jacobian[rows, :] if rows else sp.zeros(0, len(model.q)), *args)
         self.T = compile_matrix(sp.Matrix([model.kinetic_energy]), *args)
+        # gaps (NaN for `between` contacts, which have none): which contacts touch
+        self.gaps = compile_matrix(sp.Matrix([c["gap"] if c.get("gap") is not None else sp.nan for c in contacts]),
+                                   *args)
         vs = sp.Symbol("vn", real=True)
         self.e = [compile_matrix(sp.Matrix([c["restitution"]]), model.t, [vs], [], model.parameter_symbols)
                   for c in contacts]
@@ -303,9 +308,13 @@ def resolve(model: MechanicalModel, contact: str | None = None, q: np.ndarray | 
     mode_list: list[str | None] = [None] * len(im.names)
     for k in active:
         mode_list[k] = modes.get(k, "stick" if k in Jt else "slip")
+    with np.errstate(invalid="ignore"):
+        touching = np.abs(im.gaps(t, q, u, p).ravel()) <= 1e-9 * (1 + np.max(np.abs(q), initial=0.0))
+    scale = 1e-12 * max(1.0, float(np.max(np.abs(u_after), initial=0.0)))
+    further = [name for k, name in enumerate(im.names) if touching[k] and v_after[k] < -scale]
     res = ImpactResult(list(model.coordinates), im.names, u, u_after, U, v_before, v_after,
                        energy_before=T_before, energy_after=float(im.T(t, q, u_after, p)[0, 0]),
-                       tangential_impulses=tangential, modes=mode_list, restitution_factor=factor)
+                       tangential_impulses=tangential, modes=mode_list, restitution_factor=factor, further=further)
     res.joint_impulses = joint_impulses(model, q, u, u_after, U, p, t, tangential)
     return res
 

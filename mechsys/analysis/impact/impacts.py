@@ -291,13 +291,17 @@ def sequential_impacts(model: MechanicalModel, c: Compiled, p: np.ndarray, t: fl
                        rhs: RightHandSide, impacts: list[dict],
                        resolve: Callable[..., ImpactResult]) -> np.ndarray:
     """Touching contacts that approach after an impact collide at the same instant, one after another
-    (Krodkiewski problem 55): repeat until no touching contact approaches."""
+    (Krodkiewski problem 55): repeat until no touching contact approaches. Resting (persistent) contacts take
+    part: a ball struck while it rests on the floor is driven into it and bounces off it. A resting contact that
+    separates after the impacts is released (the old pivot of a rocking block when its other corner lands): its
+    row would otherwise hold the bodies together, and the block sank through the floor gaining energy."""
     for _ in range(1000):
         gaps, vn = contact_state(model, c, p, t, q, u)
         scale = 1e-12 * max(1.0, float(np.max(np.abs(u))))
-        approaching = [c.gap_names[k] for k in range(len(c.gap_names)) if k not in rhs.persistent
-                       and abs(gaps[k]) <= 1e-9 * (1 + np.max(np.abs(q))) and vn[k] < -scale]
+        approaching = [c.gap_names[k] for k in range(len(c.gap_names))
+                       if abs(gaps[k]) <= 1e-9 * (1 + np.max(np.abs(q))) and vn[k] < -scale]
         if not approaching:
+            rhs.persistent[:] = [k for k in rhs.persistent if vn[k] <= scale]
             return u
         res = resolve(model, None, q, u, t, only=approaching[:1])
         name = approaching[0]
