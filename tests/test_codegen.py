@@ -427,6 +427,25 @@ def test_constraint_functions_vanish_on_the_files_consistent_initial_state(tmp_p
         assert "holonomic" in (folder / "README.md").read_text()
 
 
+def test_a_guessed_initial_state_is_assembled_onto_the_loop(tmp_path):
+    """A user's guess of the coupler angle (theta3 = 0.2) leaves the four-bar's loop open by 0.2 m. The package's
+    initial state was that guess: its example integrated the open loop (theta2(1 s) = -0.0707, simulate's 0.6973),
+    exit 0. It is now the state simulate starts from, on the loop, and the README says which values moved."""
+    model = mechsys.load(ROOT / "systems" / "four_bar.yaml", overrides={"theta3": "0.2"})
+    pkg = derive_package(model)
+    folder = write(pkg, "python", tmp_path / "four_bar")
+    x0 = pkg.initial_state()
+    results = run_python(pkg, folder, [(0.0, x0[:pkg.n], x0[pkg.n:])])[0]
+    assert max(map(abs, results["constraint_position"] + results["constraint_velocity"])) < 1e-12
+    from mechsys.analysis.motion.simulate import initial_state, simulate
+
+    assert x0 == pytest.approx(list(initial_state(model)[2]), abs=1e-15)
+    assert "assembled onto the constraints" in (folder / "README.md").read_text()
+    run = subprocess.run([sys.executable, "example.py", "1.0"], cwd=folder, capture_output=True, text=True, timeout=120)
+    final = dict(line.split(" = ") for line in run.stdout.splitlines() if " = " in line)
+    assert float(final["theta2"]) == pytest.approx(float(simulate(model, t_end=1.0).q[-1][0]), abs=1e-6)
+
+
 def test_method_kane_gives_the_same_accelerations(tmp_path):
     model, _ = bundled("centrifuge")
     pkg = derive_package(model, "kane")

@@ -116,7 +116,7 @@ class Quantity:
 
     name: str  # as in the model file
     code: str  # the identifier (names.py)
-    value: float  # default (parameters) or initial value (coordinates)
+    value: float  # default (parameters) or initial value (coordinates; assembled onto the constraints)
     unit: str = ""
     comment: str = ""
     expression: str = ""  # a parameter given as an expression of others
@@ -283,10 +283,11 @@ def derive_package(model: "MechanicalModel", method: str = "lagrange") -> Packag
     parameters = [Quantity(n, codes[n], model.parameters[n], *units.get(n, ("", "")),
                            expression=_expression(raw.get(n))) for n in params]
     coordinates = []
-    for name, u in zip(model.coordinates, model.u):
+    q0, u0, moved = _initial_state(model)
+    for k, (name, u) in enumerate(zip(model.coordinates, model.u)):
         unit, comment = units.get(name, ("", ""))
-        coordinates.append(Quantity(name, codes[name], doc.initial[name], unit or ("rad" if model.angles[name] else ""),
-                                    comment, rate_code=codes[u.name], rate=doc.initial_rate[name]))
+        coordinates.append(Quantity(name, codes[name], float(q0[k]), unit or ("rad" if model.angles[name] else ""),
+                                    comment, rate_code=codes[u.name], rate=float(u0[k])))
     rows = [(c.name, c.kind) for c in model.kin.constraints]
     lam = [sp.Dummy(f"lam{i}") for i in range(len(rows))]
     inputs = {model.t: ("t", 0, "t")}
@@ -295,7 +296,7 @@ def derive_package(model: "MechanicalModel", method: str = "lagrange") -> Packag
         inputs.update({s: (vector, i, codes.get(s.name, "")) for i, s in enumerate(symbols)})
     pkg = Package(plain(model.name), prefix, plain(Path(doc.file).name), method, plain(doc.spec.description or ""),
                   coordinates, parameters, rows, {}, inputs, [(n, to_text(e)) for n, e in model.prescribed.items()],
-                  _notes(model), __version__)
+                  _notes(model, moved), __version__)
     n, m = len(model.q), len(rows)
 
     def add(name: str, args: tuple[str, ...], shape: tuple[int, ...], program: Program, summary: str) -> None:
@@ -309,7 +310,7 @@ def derive_package(model: "MechanicalModel", method: str = "lagrange") -> Packag
     blocks = [list(eq.M), list(eq.f)] + ([list(eq.A), list(eq.b)] if m else [])
     shared = shared_program([e for block in blocks for e in block],
                             [model.t, *model.q, *model.u, *model.parameter_symbols], wrt)
-    _check_regular(model, shared, n, m)
+    _check_regular(model, shared, n, m, pkg.initial_state())
     named = ForwardProgram(shared.args, list(shared.values), [], dict(shared.symbols), [], [])
     as_named = []  # each output of the CSE, or its temporary in ``named``
     for k, e in enumerate(shared.outputs):
@@ -362,15 +363,34 @@ def _expression(value: object) -> str:
     return ""
 
 
-def _check_regular(model: "MechanicalModel", shared: "ForwardProgram", n: int, m: int) -> None:
-    """AnalysisError when [[M, -A^T], [A, 0]] (M without constraints) is singular at the file's initial state, as
-    `mechsys simulate` refuses it: the generated accelerations would fail (or, in MATLAB, be Inf) from the start.
-    ``shared``: the CSE of M, f, A and b (derive_package's), evaluated there."""
+def _initial_state(model: "MechanicalModel") -> tuple[list[float], list[float], list[str]]:
+    """The package's initial state (q0, u0) and the coordinates and rates assembly moved: with constraint rows,
+    the file's values assembled onto them as `mechsys simulate` starts (Gauss-Newton on Phi, then the
+    minimum-norm change of u), so the generated examples start on the loop; AnalysisError when that fails. Before,
+    a four-bar with a guessed coupler angle started its exported example 0.2 m off its loop (exit 0)."""
+    from mechsys.analysis.motion.simulate import check_on_manifold, file_state, initial_state
+
+    q_file, u_file = file_state(model)
+    if not model.kin.constraints:
+        return list(q_file), list(u_file), []
+    c, p, y0 = initial_state(model)
+    n = len(model.q)
+    q0, u0 = y0[:n], y0[n:]
+    check_on_manifold(c, p, 0.0, q0, u0)
+    moved = [name for k, name in enumerate(model.coordinates)
+             if abs(q0[k] - q_file[k]) > 1e-12 * (1 + abs(q_file[k]))]
+    moved += [f"der({name})" for k, name in enumerate(model.coordinates)
+              if abs(u0[k] - u_file[k]) > 1e-12 * (1 + abs(u_file[k]))]
+    return [float(x) for x in q0], [float(x) for x in u0], moved
+
+
+def _check_regular(model: "MechanicalModel", shared: "ForwardProgram", n: int, m: int, state: list[float]) -> None:
+    """AnalysisError when [[M, -A^T], [A, 0]] (M without constraints) is singular at the package's initial state
+    ``state`` = [q; u], as `mechsys simulate` refuses it: the generated accelerations would fail (or, in MATLAB, be
+    Inf) from the start. ``shared``: the CSE of M, f, A and b (derive_package's), evaluated there."""
     import numpy as np
 
-    values = (0.0, *[model.doc.initial[c] for c in model.coordinates],
-              *[model.doc.initial_rate[c] for c in model.coordinates],
-              *[model.parameters[s.name] for s in model.parameter_symbols])
+    values = (0.0, *state, *[model.parameters[s.name] for s in model.parameter_symbols])
     out = np.asarray(call_generated(compile_program(shared), values, len(shared.outputs)), dtype=float)
     M = K = out[:n * n].reshape(n, n)
     if m:
@@ -389,10 +409,13 @@ def _check_regular(model: "MechanicalModel", shared: "ForwardProgram", n: int, m
                         "would fail; change the initial state (--set) or the constraints")
 
 
-def _notes(model: "MechanicalModel") -> list[str]:
-    """What the package leaves out, so that nobody takes it for the whole model file."""
+def _notes(model: "MechanicalModel", moved: Sequence[str] = ()) -> list[str]:
+    """What the package leaves out or changed, so that nobody takes it for the whole model file."""
     spec = model.doc.spec
     notes = []
+    if moved:
+        notes.append(f"the initial state is the file's assembled onto the constraints, as `mechsys simulate` starts "
+                     f"(moved: {', '.join(moved)})")
     if spec.contacts:
         notes.append(f"contacts ({', '.join(c.name for c in spec.contacts)}): impacts are not exported; the "
                      "functions give the smooth motion between impacts (`mechsys simulate` handles the impacts)")
