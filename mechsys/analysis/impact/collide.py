@@ -32,6 +32,7 @@ class ImpactResult:
     tangential_impulses: np.ndarray | None = None  # (contacts, 3): friction impulse on the first side, ground axes
     modes: list[str | None] = field(default_factory=list)  # "stick" | "slip" per contact; None without impulse
     restitution_factor: float = 1.0  # < 1 when e was lowered so that friction does not create energy
+    held: list[str] = field(default_factory=list)  # prescribed coordinates without mass, their motion kept
     further: list[str] = field(default_factory=list)  # touching contacts that approach after it: impacts to come
 
     @property
@@ -52,7 +53,7 @@ class ImpactResult:
                 "normal_velocity_after": [float(x) for x in self.normal_velocity_after],
                 "joint_impulses": self.joint_impulses, "energy_loss": self.energy_loss,
                 "energy_before": self.energy_before, "energy_after": self.energy_after,
-                "further_impacts": list(self.further)}
+                "further_impacts": list(self.further), "held": list(self.held)}
 
     def _tangential(self) -> np.ndarray:
         if self.tangential_impulses is None:
@@ -75,9 +76,14 @@ class ImpactModel:
         self.J = compile_matrix(model.partials(vn), *args)
         self.vn_t = compile_matrix(vn.xreplace({u: 0 for u in model.u}), *args)
         self.M = compile_matrix(model.equations("lagrange").M, *args)
-        # drive constraints of prescribed coordinates are released during the impact (M = MO)
+        # drive constraints of prescribed coordinates are released during the impact (M = MO), except where the
+        # driven coordinate carries no mass (resolve: held)
         rows = [k for k, c in enumerate(model.kin.constraints) if not c.name.startswith("drive(")]
         self.A = compile_matrix(model.constraint_jacobian[rows, :] if rows else sp.zeros(0, len(model.q)), *args)
+        self.drives = [(c.name[len("drive("):-1], k) for k, c in enumerate(model.kin.constraints)
+                       if c.name.startswith("drive(")]
+        self.A_drive = compile_matrix(model.constraint_jacobian[[k for _, k in self.drives], :] if self.drives
+                                      else sp.zeros(0, len(model.q)), *args)
         self.T = compile_matrix(sp.Matrix([model.kinetic_energy]), *args)
         # gaps (NaN for `between` contacts, which have none): which contacts touch
         self.gaps = compile_matrix(sp.Matrix([c["gap"] if c.get("gap") is not None else sp.nan for c in contacts]),
@@ -142,6 +148,22 @@ def contact_degeneracy(model: MechanicalModel, t: float, q: np.ndarray, u: np.nd
     return None
 
 
+def _held_drives(im: ImpactModel, M: np.ndarray, A: np.ndarray, t: float, q: np.ndarray, u: np.ndarray,
+                 p: np.ndarray) -> tuple[np.ndarray, list[str]]:
+    """A with the drive rows of the prescribed coordinates that carry no mass (M[i, i] = 0) added, and their names.
+    Released, such a coordinate takes any impulse without changing it: a ball on a massless table driven up and
+    down passed through it (impulse 1e-17). Held, the table moves as prescribed through the impact, the
+    vibrating-table model: v+ = (1 + e) v_table - e v_ball."""
+    if not im.drives:
+        return A, []
+    scale = max(float(np.max(np.abs(M))), 1e-300)
+    index = {name: i for i, name in enumerate(im.model.coordinates)}
+    keep = [r for r, (name, _k) in enumerate(im.drives) if abs(M[index[name], index[name]]) <= 1e-12 * scale]
+    if not keep:
+        return A, []
+    return np.vstack([A, im.A_drive(t, q, u, p)[keep]]), [im.drives[r][0] for r in keep]
+
+
 def _tangent_basis(n: np.ndarray, Jr: np.ndarray) -> np.ndarray:
     """Orthonormal rows spanning the tangent directions (normal to n) in which the contact can slide at all:
     2 rows for a 3-D contact, 1 for a planar one, 0 when no rate moves the contact point tangentially."""
@@ -181,6 +203,9 @@ def resolve(model: MechanicalModel, contact: str | None = None, q: np.ndarray | 
         raise contact_degeneracy(model, t, q, u, p) or AnalysisError(
             "the impact equations are not finite at this state (a division by zero in the mass matrix or the "
             "constraints: check the parameters)")
+    A, held = _held_drives(im, M, A, t, q, u, p)
+    # A u+: 0 on the model's constraints (scleronomic here), the drive's speed (unchanged) on a held drive row
+    target = np.concatenate([np.zeros(A.shape[0] - len(held)), A[A.shape[0] - len(held):] @ u])
     v_before = J @ u + vt
     candidates = [k for k, name in enumerate(im.names) if (contact is None or name == contact)
                   and (only is None or name in only)]
@@ -219,7 +244,7 @@ def resolve(model: MechanicalModel, contact: str | None = None, q: np.ndarray | 
         K[n + a:n + a + s, :n] = Jst
         K[n + a + s:, :n] = A
         rhs = np.concatenate([M @ u, -ee[active] * v_before[active] - vt[active],
-                              -np.concatenate([vtt[k] for k in stick]) if stick else np.zeros(0), np.zeros(m)])
+                              -np.concatenate([vtt[k] for k in stick]) if stick else np.zeros(0), target])
         sol = np.linalg.lstsq(K, rhs, rcond=None)[0]
         if s and np.linalg.norm(K @ sol - rhs) > 1e-9 * (np.linalg.norm(rhs) + np.linalg.norm(K) * np.linalg.norm(sol)):
             return None  # sticking is kinematically impossible here (more velocity conditions than freedoms)
@@ -314,7 +339,8 @@ def resolve(model: MechanicalModel, contact: str | None = None, q: np.ndarray | 
     further = [name for k, name in enumerate(im.names) if touching[k] and v_after[k] < -scale]
     res = ImpactResult(list(model.coordinates), im.names, u, u_after, U, v_before, v_after,
                        energy_before=T_before, energy_after=float(im.T(t, q, u_after, p)[0, 0]),
-                       tangential_impulses=tangential, modes=mode_list, restitution_factor=factor, further=further)
+                       tangential_impulses=tangential, modes=mode_list, restitution_factor=factor, further=further,
+                       held=held)
     res.joint_impulses = joint_impulses(model, q, u, u_after, U, p, t, tangential)
     return res
 

@@ -737,10 +737,27 @@ def _start(model: MechanicalModel, c: Compiled, p: np.ndarray) -> tuple[np.ndarr
     if not (np.all(np.isfinite(M0)) and np.all(np.isfinite(f0))):
         raise AnalysisError("the mass matrix or the forces are not finite at t = 0 (an overflow or a division by "
                             "zero: check the parameter values, e.g. a mass of 1e200 squared)")
-    cond = np.linalg.cond(M0) if M0.size else 1.0
+    cond = _motion_condition(c, p, q0, u0, M0)
     if cond > 1e8:
         warnings.append(f"the mass matrix is badly conditioned (cond = {cond:.2e}): results may lose accuracy")
     return q0, u0, warnings
+
+
+def _motion_condition(c: Compiled, p: np.ndarray, q: np.ndarray, u: np.ndarray, M: np.ndarray) -> float:
+    """The condition number of M on the motions the constraints allow (N^T M N, N a basis of A's null space): a
+    prescribed coordinate of a massless body is a zero row of M that its drive row holds, and a ball on a massless
+    turntable was warned 'badly conditioned (cond = inf)' at cond 250."""
+    import scipy.linalg as sla
+
+    if not M.size:
+        return 1.0
+    if c.m:
+        with np.errstate(all="ignore"):
+            A = c.A(0.0, q, u, p)
+        if np.all(np.isfinite(A)):
+            N = sla.null_space(A)
+            M = N.T @ M @ N
+    return float(np.linalg.cond(M)) if M.size else 1.0
 
 
 def _closed_loop_scipy(job: Integration, y0: np.ndarray) -> tuple:
