@@ -889,17 +889,16 @@ def find_equilibria(model: MechanicalModel, search: dict[str, tuple[float, float
     dropped: dict[str, list[np.ndarray]] = {}
     roots = loops.merge_branch_points(problem, drop_singular(problem, roots, p, dropped), p)
     message = ""
-    isolated = []
-    family = None
+    isolated, families = [], []
     for z in roots:
-        if not is_isolated(problem, z, p):
-            family = family if family is not None else z  # not isolated: one representative of the continuum
-        else:
-            isolated.append(z)  # (at a gimbal lock the chart, not the physics, makes roots a continuum: charts.py)
-    if family is not None:
-        isolated.append(family)
+        # (at a gimbal lock the chart, not the physics, makes roots a continuum: charts.py)
+        (isolated if is_isolated(problem, z, p) else families).append(z)
+    if families:
+        families = continua(problem, families, p)
+        isolated += families
         message = ("the equilibria are not isolated (singular Jacobian: e.g. a free rigid-body motion); "
-                   "one representative of the continuum is shown")
+                   + ("one representative of the continuum is shown" if len(families) == 1 else
+                      f"one representative of each of {len(families)} continua is shown"))
     equilibria = [problem.equilibrium(z) for z in isolated]
     assess_all(problem, equilibria, p)
     for z, e in zip(isolated, equilibria):
@@ -927,16 +926,62 @@ def is_isolated(problem: EquilibriumProblem, z: np.ndarray, p: np.ndarray) -> bo
     chart (charts.py), not a continuum of steady motions (a free heading, a free rigid-body motion)."""
     from mechsys.analysis.equilibrium.charts import singularities
 
-    J = _equilibrated(problem.J(z, p))
+    return not _motions(problem, z, p).size or bool(singularities(problem.model, problem.equilibrium(z).coordinates, p))
+
+
+def _motions(problem: EquilibriumProblem, z: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """An orthonormal basis (rows) of the directions in the coordinates and rates along which the root z continues
+    as roots to first order: the null space of its Jacobian (unit columns and rows) projected on them; empty where
+    z is isolated. A null direction of the multipliers alone is a redundant constraint row (lambda not unique),
+    not a continuum."""
+    J = problem.J(z, p)
     if not J.size:
-        return True
-    _, sv, Vt = np.linalg.svd(J)
+        return np.zeros((0, len(z)))
+    columns = np.linalg.norm(J, axis=0)
+    columns[columns == 0] = 1.0  # a zero column: its unit vector is a null vector either way
+    _, sv, Vt = np.linalg.svd(_equilibrated(J))
     sv = np.concatenate([sv, np.zeros(J.shape[1] - sv.size)])
-    null = Vt[sv <= 1e-9 * max(1.0, sv[0])]
-    # a null direction of the multipliers alone is a redundant constraint row (lambda not unique), not a continuum
+    null = Vt[sv <= 1e-9 * max(1.0, sv[0])] / columns  # null vectors of J itself (the columns' scaling undone)
     moves = null[:, : problem.nq + len(problem.rate_unknowns)]
-    return not (moves.size and np.linalg.norm(moves, 2) > 1e-6) or \
-        bool(singularities(problem.model, problem.equilibrium(z).coordinates, p))
+    if not moves.size:
+        return moves
+    U, S, Wt = np.linalg.svd(moves, full_matrices=False)
+    return Wt[S > 1e-6 * max(float(np.max(np.linalg.norm(null, axis=1))), 1e-300)]
+
+
+def continua(problem: EquilibriumProblem, roots: list[np.ndarray], p: np.ndarray) -> list[np.ndarray]:
+    """One representative of each continuum among roots that are not isolated: a root joins the first kept one
+    whose tangent space (_motions) holds their difference (angles on the circle), to 1e-6 of it. A pendulum beside
+    a free flywheel rests hanging and upright at every flywheel angle: two continua, both listed (only the first
+    was, and the upright pendulum disappeared)."""
+    kept: list[tuple[np.ndarray, np.ndarray]] = []
+    for z in roots:
+        if not any(_along(problem, z, r, basis) for r, basis in kept):
+            kept.append((z, _motions(problem, z, p)))
+    return [z for z, _ in kept]
+
+
+def _along(problem: EquilibriumProblem, z: np.ndarray, r: np.ndarray, basis: np.ndarray) -> bool:
+    """z - r lies in the span of ``basis`` (rows, orthonormal) to 1e-6 of its size, up to whole turns of the angles:
+    a winch's drum and gears turn together at their ratios, so two of its rests far along the line differ by the
+    line's direction minus turns the wrapping took off (the integer turns by least squares, then rounded)."""
+    k = problem.nq + len(problem.rate_unknowns)
+    d = (z - r)[:k]
+    ang = np.flatnonzero(problem.is_angle()[:k])
+    d[ang] -= 2 * math.pi * np.rint(d[ang] / (2 * math.pi))
+
+    def off(x: np.ndarray) -> np.ndarray:
+        return x - basis.T @ (basis @ x) if basis.size else x
+
+    tol = 1e-6 * (1 + np.linalg.norm(d))
+    if np.linalg.norm(off(d)) <= tol:
+        return True
+    if not len(ang):
+        return False
+    turns = np.zeros((k, len(ang)))
+    turns[ang, np.arange(len(ang))] = 2 * math.pi
+    shifts = np.rint(np.linalg.lstsq(np.column_stack([off(c) for c in turns.T]), off(d), rcond=None)[0])
+    return bool(np.linalg.norm(off(d - turns @ shifts)) <= tol)
 
 
 def _equilibrated(J: np.ndarray) -> np.ndarray:
