@@ -861,6 +861,10 @@ def collide(
             joints.add(name, *vec)
         energy = Table("kinetic energy", ["before", "after", "lost"])
         energy.add(result.energy_before, result.energy_after, result.energy_loss)
+        for name, what in result.apart.items():
+            energy.notes.append(f"contact {name!r} does not touch at this state ({what}), and its impulse depends on "
+                                "where the bodies are: an impact acts where the two sides meet, so move them there "
+                                "(--set) for the impact they will have")
         if result.further:
             verb = "touches and approaches" if len(result.further) == 1 else "touch and approach"
             energy.notes.append(f"after this impact {', '.join(result.further)} {verb}: further impacts follow at "

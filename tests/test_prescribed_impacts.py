@@ -81,3 +81,17 @@ def test_a_ball_on_a_massless_vibrating_table_bounces_as_the_closed_form(tmp_pat
     for row, (t, v) in zip(table, reference):
         assert float(row["t"]) == pytest.approx(t, rel=1e-9)
         assert float(row["after.der(y)"]) == pytest.approx(v, rel=1e-7)
+
+
+def test_collide_notes_a_contact_whose_points_are_apart():
+    """The bullet set 0.3 m below the pendulum's point C is resolved as striking C (the contact's points): the
+    output says the points are apart. At the file's state they touch, and there is no note."""
+    from pathlib import Path
+
+    bullet = str(Path(__file__).resolve().parents[1] / "systems" / "bullet_pendulum.yaml")
+    apart = json.loads(CliRunner().invoke(app, ["collide", bullet, "--set", "y2=-0.3", "-f", "json"]).output)
+    assert apart["apart"] == {"bullet_hits_pendulum": "its points bullet and pendulum.C are 0.3 apart"}
+    touching = json.loads(CliRunner().invoke(app, ["collide", bullet, "-f", "json"]).output)
+    assert touching["apart"] == {}
+    text = CliRunner().invoke(app, ["collide", bullet, "--set", "y2=-0.3"]).output
+    assert "does not touch at this state" in " ".join(text.split())
