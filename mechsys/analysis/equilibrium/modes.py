@@ -101,15 +101,30 @@ _STABLE = ("asymptotically stable", "stable")
 
 
 def _first_stable(res, candidates: list[Equilibrium], kind: str = "equilibrium") -> tuple[Equilibrium, str]:
-    """The first stable equilibrium of the candidates, or (none stable) the first one with a note saying that the
-    search found no stable equilibrium and what it covered (a long chain's multistart may miss its one stable
-    rest among 2^n)."""
+    """The stable equilibrium of the candidates nearest the file's initial state (coordinates and steady rates,
+    angles on the circle), or (none stable) the first one with a note saying that the search found no stable
+    equilibrium and what it covered (a long chain's multistart may miss its one stable rest among 2^n). Nearest,
+    not first in sorted order: two masses on a lever started 1 cm from their springs' rest vibrated about a rest
+    at x = -2 that the springs reach only through their anchors."""
     stable = [e for e in candidates if e.stability in _STABLE]
     if stable:
-        return stable[0], ""
+        return min(stable, key=lambda e: _from_initial(res.problem, e)), ""
     what = f" ({res.search.text()})" if res.search is not None else ""
     return candidates[0], (f"the search found no stable {kind}{what}: these modes are about the first one "
                            f"found ({candidates[0].stability}); give another with --at")
+
+
+def _from_initial(problem, e: Equilibrium) -> float:
+    """The distance of e from the file's initial coordinates and rates (the problem's metric: angles on the
+    circle); 0 for every e when the problem is not at hand."""
+    if problem is None:
+        return 0.0
+    model = problem.model
+    z = problem.state(e)
+    start = z.copy()  # the rest of the state (multipliers, a nonholonomic problem's extra unknowns) as e's
+    start[:problem.nq + len(problem.rate_unknowns)] = [model.doc.initial.get(c, 0.0) for c in problem.free] + \
+        [model.doc.initial_rate.get(c, 0.0) for c in problem.rate_unknowns]
+    return problem.distance(z, start)
 
 
 def _settled(model: MechanicalModel) -> Equilibrium | None:
