@@ -129,6 +129,31 @@ class EquilibriumProblem:
         self.angles = model.angles
         self.fixed_rates = self._family_rates()
         self.rate_unknowns = [c for c in self.cyclic if c not in self.fixed_rates]
+        self.angles = self._periodic_angles()
+
+    def _periodic_angles(self) -> dict[str, bool]:
+        """model.angles, less the free angles the rest equations are not 2 pi-periodic in (checked at two random
+        points): a torsional spring's k*theta makes theta = 5.6 and theta = 5.6 - 2 pi different states, and
+        wrapped they were one (a pendulum with a spring and a torque had 'no equilibrium' in th = 0:7, and a
+        sweep's branch jumped by 2 pi). A constant torque keeps F periodic (its potential is not)."""
+        angles = dict(self.model.angles)
+        names = [c for c in self.free if angles.get(c, False)]
+        if not names or not self.unknowns:
+            return angles
+        p = parameter_values(self.model)
+        rng = np.random.default_rng(5)
+        for _ in range(2):
+            z = rng.uniform(-np.pi, np.pi, len(self.unknowns))
+            F = self.F(z, p)
+            for c in names:
+                shifted = z.copy()
+                shifted[self.free.index(c)] += 2 * np.pi
+                G = self.F(shifted, p)
+                if np.all(np.isfinite(F)) and np.all(np.isfinite(G)) and \
+                        np.max(np.abs(G - F)) > 1e-9 * (1 + float(np.max(np.abs(F)))):
+                    angles[c] = False
+        self.undefined = False  # a draw where a force is not defined says nothing about the search
+        return angles
 
     # ------------------------------------------------------------------------------------- symbols
     def _q(self, name: str) -> sp.Symbol:
@@ -703,6 +728,7 @@ def _disk_key(problem: EquilibriumProblem, key: tuple) -> str | None:
                "unknowns": [str(u) for u in problem.unknowns],
                "free": list(problem.free), "rates": list(problem.rate_unknowns),
                "split": repr(getattr(problem, "split", None)),
+               "angles": sorted(c for c, a in problem.angles.items() if a),
                "initial": sorted((str(k), float(v)) for k, v in model.doc.initial.items()),
                "initial_rate": sorted((str(k), float(v)) for k, v in model.doc.initial_rate.items()),
                "search": [key[0].hex(), *map(repr, key[1:])],

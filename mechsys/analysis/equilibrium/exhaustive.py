@@ -116,6 +116,7 @@ def polynomial_form(problem: EquilibriumProblem, p: np.ndarray) -> PolynomialFor
     values = [*problem.extra(), *p]
     subs = {s: _rational(float(v)) for s, v in zip(given, values)}
     angles = {s for s, a in zip(unknowns, problem.is_angle()) if a}
+    names = dict(zip(unknowns, problem.free))  # an angle of the model that its equations are not periodic in
     exprs = []
     for e in problem.residual_exprs:
         e = e.xreplace(subs)
@@ -136,6 +137,9 @@ def polynomial_form(problem: EquilibriumProblem, p: np.ndarray) -> PolynomialFor
                 raise NotExhaustible(f"--exhaustive: the equilibrium equations are not polynomial in the unknowns, "
                                      f"sin and cos of the angles (they contain {_short(f)})")
             arg = f.args[0]
+            if arg in unknown_set and arg not in angles and problem.model.angles.get(names.get(arg, ""), False):
+                raise NotExhaustible(f"--exhaustive: the angle {arg} appears both inside and outside sin/cos (the "
+                                     "equations are transcendental)")
             if arg not in angles:
                 what = (f"{arg} is not an angle (angle: true in the file makes it one)" if arg in unknown_set
                         else f"the argument {_short(arg)} is not a single angle or an integer multiple")
