@@ -130,6 +130,17 @@ def test_sibling_check_file_is_discovered_and_markdown_written(tmp_path):
 @pytest.mark.parametrize("entry, words", [
     ("{name: bad key, analysis: info, output: dof, value: 1, tolerence: 0.1}", ["tolerence"]),
     ("{name: bad analysis, analysis: eigenvalues, output: dof, value: 1}", ["analysis"]),
+    # expectations that could not fail (they passed whatever the analysis gave) or were silently half ignored
+    ("{name: no value, analysis: info, output: dof}", ["nothing to compare"]),
+    ("{name: tolerance only, analysis: info, output: dof, tolerance: 0.5}", ["nothing to compare"]),
+    ("{name: stability alone, analysis: equilibria, output: count, value: 3, stability: unstable}",
+     ["'stability' needs 'equilibrium'"]),
+    ("{name: empty equilibrium, analysis: equilibria, equilibrium: {}}", ["'equilibrium' is empty"]),
+    ("{name: expression on simulate, analysis: simulate, output: final.q, expression: q}",
+     ["'expression' belongs to analysis: derive"]),
+    ("{name: derive value, analysis: derive, output: 'M[1,1]', value: 99}", ["give 'expression'"]),
+    ("{name: derive nothing, analysis: derive, output: 'M[1,1]'}", ["give 'expression'"]),
+    ("{name: equilibrium and value, analysis: equilibria, equilibrium: {q: 0}, value: 1}", ["not used"]),
 ])
 def test_invalid_expectation_in_a_sibling_file_is_an_input_error(tmp_path, entry, words):
     (tmp_path / "p57.yaml").write_text(model_without_expect("problem57"), encoding="utf-8")

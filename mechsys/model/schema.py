@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from typing import Annotated, Literal, Union
 
-from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, field_validator
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, field_validator, model_validator
 
 
 def _expr(value: object) -> object:
@@ -411,6 +411,36 @@ class Expectation(Strict):
     rel_tolerance: float = Field(0.0, ge=0, description="relative tolerance on 'value'")
     min: float | None = None
     max: float | None = None
+
+    @model_validator(mode="after")
+    def _can_fail(self) -> "Expectation":
+        """An expectation that states nothing to compare would pass whatever the analysis gives (or crash): each
+        kind must say what it expects, and keys that would be ignored are refused."""
+        compared = [k for k in ("value", "min", "max") if getattr(self, k) is not None]
+        if self.equilibrium is not None:
+            if self.analysis != "equilibria":
+                raise ValueError("'equilibrium' belongs to analysis: equilibria")
+            if not self.equilibrium:
+                raise ValueError("'equilibrium' is empty: give the coordinate values of the equilibrium expected")
+            unused = compared + [k for k in ("output", "expression") if getattr(self, k) is not None]
+            if unused:
+                raise ValueError(f"{', '.join(repr(k) for k in unused)} is not used with 'equilibrium' (its values "
+                                 "and 'stability' are the expectation)")
+            return self
+        if self.stability is not None:
+            raise ValueError("'stability' needs 'equilibrium' (the coordinate values of the equilibrium it is about)")
+        if self.output is None:
+            raise ValueError("an expectation needs 'output' (or, for equilibria, 'equilibrium')")
+        if self.analysis == "derive":
+            if self.expression is None or compared:
+                raise ValueError("a derive expectation compares an expression: give 'expression' (not value, min "
+                                 "or max)")
+        elif self.expression is not None:
+            raise ValueError("'expression' belongs to analysis: derive")
+        elif not compared:
+            raise ValueError("nothing to compare: give 'value', 'min' or 'max' (an expectation without them passes "
+                             "whatever the analysis gives)")
+        return self
 
 
 # ----------------------------------------------------------------------------------------- the file
