@@ -268,6 +268,17 @@ def test_the_files_outputs_are_outputs_of_the_fmu(tmp_path):
     assert np.ptp(want[:, 3]) > 1.0  # the acceleration varies: the match is not of constants
 
 
+def test_an_output_of_constraint_forces_is_refused_by_name(tmp_path):
+    """reaction() in `outputs:` failed deep in the code generator ('fmu depends on _reaction_0, ... which is not an
+    argument', exit 1); it is an input error at the output's line."""
+    path = tmp_path / "pendulum_reaction.yaml"
+    text = PENDULUM.read_text(encoding="utf-8").split("\nexpect:")[0]
+    path.write_text(text + "\noutputs:\n  elbow: position(rod2)\n  pin: reaction(rod1)\n", encoding="utf-8")
+    line = one_line(invoke("codegen", str(path), "-t", "fmu", "-o", str(tmp_path / "r.fmu")))
+    assert line.startswith(f"{path}:") and "outputs.pin: pin use reaction()" in line
+    assert not (tmp_path / "r.fmu").exists()
+
+
 @needs_fmpy
 @needs_gcc
 @pytest.mark.slow

@@ -205,6 +205,16 @@ def fmu_layout(model: "MechanicalModel", pkg: Package) -> FmuLayout:
     derivatives = _derivatives(pkg, states, len(parameters) + 1)
     fixed = list(ENERGIES) + ([RESIDUAL] if pkg.m else [])
     file_outputs = list(model.outputs)
+    deferred = set(getattr(model, "deferred_quantities", {}) or {})
+    forces = [name for name, expr in file_outputs if expr.free_symbols & deferred]
+    if forces:
+        written = list(model.doc.spec.outputs)  # the file's names (a vector output is expanded: cfB.x, cfB.y)
+        bases = list(dict.fromkeys(n if n in written else n.rsplit(".", 1)[0] for n in forces))
+        raise model.doc.error(("outputs", bases[0]),
+                              f"{', '.join(bases)} use reaction(), constraint_force() or multiplier(): the FMU "
+                              "exports outputs of the state alone, not the constraint forces of the equations' "
+                              "solution; leave them out of the file for the FMU (mechsys simulate --reactions and "
+                              "mechsys inverse give them)")
     taken = {v.name for v in parameters + states}
     names = mangle([name for name, _ in fixed] + [name for name, _ in file_outputs], taken)
     outputs = [Variable(names[name], "output", "continuous", "calculated", None, text) for name, text in fixed]
