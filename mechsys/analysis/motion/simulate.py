@@ -225,7 +225,11 @@ class SimulationResult:
         """E(t) - E(0) - W(t) - (the energy changes of the impacts up to t): zero up to the integration error."""
         out = self.E - self.E[0] - (self.work if self.work is not None else 0.0)
         for im in self.impacts:
-            out = out + np.where(self.t >= im["t"], float(im["energy_loss"]), 0.0)
+            after = self.t >= im["t"]
+            at = np.flatnonzero(self.t == im["t"])
+            if len(at) > 1:  # the state before the impact is a row at its instant too (an impact at t = 0)
+                after[at[0]] = False
+            out = out + np.where(after, float(im["energy_loss"]), 0.0)
         return out
 
     @property
