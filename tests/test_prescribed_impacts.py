@@ -95,3 +95,21 @@ def test_collide_notes_a_contact_whose_points_are_apart():
     assert touching["apart"] == {}
     text = CliRunner().invoke(app, ["collide", bullet, "--set", "y2=-0.3"]).output
     assert "does not touch at this state" in " ".join(text.split())
+
+
+def test_the_drive_carries_the_ball_while_it_rests_on_the_table(tmp_path):
+    """Once the ball is captured it rides the table, and the massless table's drive carries its weight and
+    acceleration: driving(s) = m (g + s''), s'' = -A w^2 sin(w t). The drive's force (and its work in the energy
+    balance) was computed without the resting contact: 0, and the balance error read 0.4."""
+    model = tmp_path / "table.yaml"
+    model.write_text(TABLE)
+    rows = tmp_path / "run.csv"
+    result = CliRunner().invoke(app, ["simulate", str(model), "--t-end", "2", "-o", str(rows), "-f", "json"])
+    assert result.exit_code == 0, result.output
+    assert json.loads(result.output)["simulation summary"]["max relative energy balance error"] < 1e-4
+    riding = [r for r in csv.DictReader(rows.open()) if float(r["driving(s)"]) != 0.0]
+    assert len(riding) > 100
+    for r in riding:
+        t = float(r["t"])
+        assert float(r["y"]) == pytest.approx(A * math.sin(W * t), abs=1e-9)
+        assert float(r["driving(s)"]) == pytest.approx(0.1 * (G - A * W**2 * math.sin(W * t)), rel=1e-6, abs=1e-9)

@@ -124,8 +124,8 @@ def _segment(job: Integration, t: float, y: np.ndarray, fns: list, lift_events: 
         return sol
 
 
-def integrate_with_impacts(job: Integration, y0: np.ndarray,
-                           capture_velocity: float) -> tuple[np.ndarray, np.ndarray, int | None, list[dict], bool]:
+def integrate_with_impacts(job: Integration, y0: np.ndarray, capture_velocity: float
+                           ) -> tuple[np.ndarray, np.ndarray, int | None, list[dict], bool, list[tuple]]:
     """Segments between impacts: gap = 0 (closing) stops the integrator, the impulse law gives the velocities of
     separation, and integration restarts. Rest rule: an impact whose approach speed is below capture_velocity is
     plastic and its contact becomes persistent (a constraint row), so a bouncing ball ends in finitely many
@@ -140,6 +140,7 @@ def integrate_with_impacts(job: Integration, y0: np.ndarray,
     n = c.n
     impacts: list[dict] = []
     times, states = [0.0], [y0]
+    active: list[tuple] = [()]  # the persistent contacts at each stored state (its multipliers need their rows)
     t, y = 0.0, y0.copy()
     steps = None  # solve_ivp with t_eval does not tell its steps; the summary says n/a
     t_end = float(grid[-1])
@@ -198,6 +199,7 @@ def integrate_with_impacts(job: Integration, y0: np.ndarray,
         if len(sol.t):
             times += list(sol.t)
             states += list(np.asarray(sol.y).T)
+            active += [tuple(rhs.persistent)] * len(sol.t)
         user = type(sol)(sol)
         user.t_events = sol.t_events[len(own):] if sol.t_events else None
         user.y_events = sol.y_events[len(own):] if sol.y_events else None
@@ -226,6 +228,7 @@ def integrate_with_impacts(job: Integration, y0: np.ndarray,
                     released.add(k)
             times.append(t)
             states.append(y)
+            active.append(tuple(rhs.persistent))
             continue
         hit = [(t_ev, i) for t_ev, i in fired if i < len(gap_events)]
         t_hit = min(ts for ts, _ in hit)
@@ -268,10 +271,11 @@ def integrate_with_impacts(job: Integration, y0: np.ndarray,
         y = np.concatenate([q, u_new])
         times.append(t)
         states.append(y)
+        active.append(tuple(rhs.persistent))
     order = np.argsort(np.array(times), kind="stable")
     T_arr = np.array(times)[order]
     Y = np.array(states)[order]
-    return T_arr, Y, steps, impacts, stopped
+    return T_arr, Y, steps, impacts, stopped, [active[i] for i in order]
 
 
 def _record(model, t, name, res, u, u_new, captured, q, p, joint_impulses) -> dict:
