@@ -236,7 +236,8 @@ def derive(
 
         model = load_model(file, set_)
         eq = model.equations(method.value)
-        extra: dict = {}
+        # JSON: the parameter values of this load (with --set), so that the symbolic equations can be evaluated
+        extra: dict = {"parameters": dict(model.parameters)} if fmt.value == "json" else {}
         verdict = None
         if check:
             from mechsys.analysis.crosscheck import cross_check

@@ -7,7 +7,9 @@ Sources: /work/shared/reference digests (Krodkiewski 2008 ch. 1-7; seeds 001 and
 """
 from __future__ import annotations
 
+import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -445,3 +447,20 @@ def test_constant_spin_rotors_give_autonomous_eom_krodkiewski(name, method, rng)
         assert np.max(np.abs(evaluate(d_dt, model, point=pt))) <= 1e-9 * scale
     assert model.is_rheonomic
     assert model.is_autonomous(method), f"{name} [{method}]: EOM reported non-autonomous"
+
+
+def test_derive_json_carries_the_parameter_values_of_the_load():
+    """README: `mechsys derive systems/centrifuge.yaml --set Mo=60 -f json -o eom.json`. The JSON held the symbolic
+    equations only, byte for byte the same with and without --set: the override was lost. It now carries the
+    parameter values, dependent ones recomputed (dM = Mo/7 in the file)."""
+    from typer.testing import CliRunner
+
+    from mechsys.cli import app
+
+    path = Path(__file__).resolve().parents[1] / "systems" / "centrifuge.yaml"
+    plain = json.loads(CliRunner().invoke(app, ["derive", str(path), "-f", "json"]).output)["parameters"]
+    changed = json.loads(CliRunner().invoke(app, ["derive", str(path), "--set", "Mo=60", "-f", "json"]).output)
+    assert changed["parameters"]["Mo"] == 60.0 and plain["Mo"] != 60.0
+    assert changed["parameters"]["dM"] == pytest.approx(60.0 / 7, rel=1e-15)
+    assert {k: v for k, v in changed["parameters"].items() if k not in ("Mo", "dM")} == \
+        {k: v for k, v in plain.items() if k not in ("Mo", "dM")}
