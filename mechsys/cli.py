@@ -98,6 +98,24 @@ def write_figure(path: Path, draw: Callable[[str], None], option: str = "--plot"
     write(path, draw, option)
 
 
+def _constant(text: str, what: str) -> float:
+    """A number, or a constant expression of the model language (`pi`, `-pi/2`, `sqrt(2)/2`: no names), as a float;
+    an input error naming ``what`` otherwise. The parser is imported only for an expression (the warm path)."""
+    try:
+        return float(text)
+    except ValueError:
+        pass
+    from mechsys.model.expressions import ExpressionError, parse_expression
+
+    try:
+        value = parse_expression(text.strip(), {})
+        if value.is_number and value.is_real:
+            return float(value)
+    except (ExpressionError, TypeError, ValueError):
+        pass
+    raise InputError(f"{what}: expected NAME=VALUE with a number or a constant expression such as pi/2")
+
+
 def check_model_file(file: Path) -> None:
     """One line (exit 2) for a model file that is missing, unreadable, not a regular file (a FIFO would hang
     the run) or too large, before anything else reads it."""
@@ -531,12 +549,9 @@ def modes(
         point = {}
         for item in at or []:
             name, sep, value = item.partition("=")
-            try:
-                point[name.strip()] = float(value)
-            except ValueError:
-                raise InputError(f"--at {item!r}: expected NAME=VALUE with a number") from None
             if not sep:
                 raise InputError(f"--at {item!r}: expected NAME=VALUE")
+            point[name.strip()] = _constant(value, f"--at {item!r}")
             check_number(f"--at {name.strip()}:", point[name.strip()])
         frf_range = None
         if frf:

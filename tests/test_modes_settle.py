@@ -215,3 +215,31 @@ def test_a_constrained_model_vibrates_about_the_stable_rest_nearest_its_start(tm
     omega, mass = math.sqrt((300 + 4 * 100) / (2.0 + 4 * 0.5)), 2.0 + 4 * 0.5
     assert data["modes"][0]["frequency_rad_s"] == pytest.approx(omega, rel=1e-9)
     assert data["modes"][0]["damping_ratio"] == pytest.approx(1.0 / (2 * omega * mass), rel=1e-9)
+
+
+def test_at_takes_constant_expressions_and_says_why_a_cyclic_coordinate_is_refused(tmp_path):
+    """`--at theta1=pi` was 'expected NAME=VALUE with a number'; a cyclic coordinate whose rate is not an unknown
+    (nothing acts on it at rest) was 'not a free coordinate', although `info` lists it as one."""
+    dp = str(ROOT / "systems" / "double_pendulum.yaml")
+    by_name = CliRunner().invoke(app, ["modes", dp, "--at", "theta1=pi", "--at", "theta2=-pi/2*2", "-f", "json"])
+    by_number = CliRunner().invoke(app, ["modes", dp, "--at", f"theta1={math.pi!r}", "--at", f"theta2={-math.pi!r}",
+                                         "-f", "json"])
+    assert by_name.exit_code == 0, by_name.output
+    assert json.loads(by_name.output)["modes"] == json.loads(by_number.output)["modes"]
+    cart = tmp_path / "cart.yaml"
+    cart.write_text("""name: cart
+parameters: {M: 1, m: 0.2, l: 0.5, g: 9.81}
+coordinates:
+  x: {initial: 0, rate: 0}
+  theta: {initial: 0.1, rate: 0}
+links:
+  cart: {joint: {type: prismatic, parent: ground, axis: x, coordinate: x}, mass: M}
+  pole:
+    joint: {type: revolute, parent: cart, axis: z, coordinate: theta}
+    mass: m
+    center_of_mass: [0, -l, 0]
+forces:
+  - {type: gravity, acceleration: [0, -g, 0]}
+""")
+    result = CliRunner().invoke(app, ["modes", str(cart), "--at", "theta=0", "--at", "x=0"])
+    assert result.exit_code == 2 and "x is cyclic, and nothing acts on it at rest" in result.stderr

@@ -175,9 +175,15 @@ def _equilibrium(model: MechanicalModel, at: dict[str, float] | None) -> tuple[E
         return _first_stable(res, _regular(res, "equilibrium"))
     problem = EquilibriumProblem(model)
     unknown = set(at) - set(problem.free) - set(problem.rate_unknowns)
+    fixed = sorted(unknown & set(problem.fixed_rates))
+    if fixed:
+        c = fixed[0]
+        raise InputError(f"--at: {c} is cyclic, and nothing acts on it at rest: every value of it is an equilibrium "
+                         f"and its steady rate is the file's (der({c}) = {problem.fixed_rates[c]:g}; change it with "
+                         f"--set 'der({c})=...'); give only {', '.join(problem.free) or 'the other coordinates'}")
     if unknown:
         raise InputError(f"--at: {', '.join(sorted(unknown))} is not a free coordinate "
-                         f"(choose from {', '.join(problem.free)})")
+                         f"(choose from {', '.join(problem.free + problem.rate_unknowns)})")
     p = parameter_values(model)
     start = np.array([at.get(c, model.doc.initial.get(c, 0.0)) for c in problem.free]
                      + [at.get(c, model.doc.initial_rate.get(c, 0.0)) for c in problem.rate_unknowns]
