@@ -112,3 +112,16 @@ def test_inverse_equals_simulate_at_the_same_instant(capsys, tmp_path):
 def test_bad_instant_options_are_one_line(capsys):
     code, out, err = run(capsys, "inverse", CRANK, "--at", "nan")
     assert code == 2 and len(err.strip().splitlines()) == 1 and "--at" in err
+
+
+def test_an_instant_too_far_for_the_assembly_steps_is_refused(capsys):
+    """At t = 1e6 s the crank (3 rad/s) has turned 3e6 rad; the assembly path was capped at 100000 steps of ~30
+    rad and sampled the drive every 500 s (each sample whole turns apart: it looked still), so the rod flipped to
+    the mirrored branch: x4 and the torque of another configuration, exit 0. Now refused; an instant the steps
+    can reach is still the closed form's (above)."""
+    code, out, err = run(capsys, "inverse", CRANK, "--at", "1e6")
+    assert code == 1 and "assembly steps" in err and len(err.strip().splitlines()) == 1
+    w, F4, t = 3.0, 4.0, 20.0
+    reached = instant(capsys, "--at", repr(t), "--set", f"F4={F4}")
+    dT, dV, x4d = _energies(t, w)
+    assert reached["driving"]["theta2"] == pytest.approx((dT + dV - F4 * x4d) / w, rel=1e-6)

@@ -27,6 +27,8 @@ class Instant:
 
 #: Largest change of the constraint residual between two assemblies on the way from t = 0 to the instant.
 STEP = 0.02
+#: Most assembly steps on the way to the instant (a drive turned 7e6 rad by 1e6 s needs 2e7)
+MAX_STEPS = 100_000
 
 
 def _path(c, p: np.ndarray, t: float, q: np.ndarray, u: np.ndarray) -> np.ndarray:
@@ -37,8 +39,21 @@ def _path(c, p: np.ndarray, t: float, q: np.ndarray, u: np.ndarray) -> np.ndarra
     samples = np.linspace(0.0, t, 2001)
     with np.errstate(all="ignore"):
         phi = np.array([np.ravel(c.phi(s, q, u, p)) for s in samples])
+        # the rows' own rate (A u + a_t at u = 0) times the time: samples of a fast drive alias, and a crank turning
+        # 7 rad/s looked still at t = 1e6 s (every sample a whole number of turns apart)
+        speed = max((float(np.max(np.abs(c.cv(s, q, np.zeros_like(u), p)), initial=0.0)) for s in samples),
+                    default=0.0)
     variation = float(np.sum(np.max(np.abs(np.diff(phi, axis=0)), axis=1))) if phi.size else 0.0
-    steps = int(min(max(math.ceil(variation / STEP), 1), 100_000)) if math.isfinite(variation) else 2000
+    variation = max(variation, speed * abs(t))
+    if not math.isfinite(variation):
+        return np.linspace(0.0, t, 2001)
+    steps = max(math.ceil(variation / STEP), 1)
+    if steps > MAX_STEPS:
+        from mechsys.errors import AnalysisError
+
+        raise AnalysisError(f"--at {t:g}: the constraints move by about {variation:.3g} between t = 0 and the instant, "
+                            f"more than {MAX_STEPS} assembly steps of {STEP}: each step could jump to another "
+                            "assembly branch; give an earlier instant, or follow the motion with mechsys simulate")
     return np.linspace(0.0, t, steps + 1)
 
 
