@@ -235,3 +235,18 @@ def test_an_impact_at_the_start_is_in_the_energy_balance():
     summary = json.loads(result.output)["simulation summary"]
     assert summary["energy lost in impacts"] == pytest.approx(0.5 * 0.1 * (3.0**2 - 1.5**2), rel=1e-12)  # m = 0.1
     assert summary["max relative energy balance error"] < 1e-12
+
+
+def test_a_contact_simulate_does_not_watch_is_named_and_a_negative_restitution_refused(tmp_path):
+    """simulate watches gap contacts only: the bullet of bullet_pendulum (a `between` contact) passed through the
+    pendulum without a word. A constant restitution below 0 (which sends the bodies on into each other) was
+    accepted."""
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1] / "systems"
+    result = CliRunner().invoke(app, ["simulate", str(root / "bullet_pendulum.yaml"), "--t-end", "0.01", "-f", "json"])
+    assert result.exit_code == 0, result.output
+    assert any("'bullet_hits_pendulum'" in n and "not watched in simulate" in n
+               for n in json.loads(result.output)["notes"])
+    bad = CliRunner().invoke(app, ["simulate", str(root / "bouncing_ball.yaml"), "--set", "e=-0.5"])
+    assert bad.exit_code == 2 and "contacts[0].restitution: must not be negative" in bad.stderr

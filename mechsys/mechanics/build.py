@@ -473,6 +473,8 @@ class Builder:
                 raise self.doc.error(cp + ("name",), f"duplicate contact name {c.name!r}")
             names.add(c.name)
             e = self.doc.parse(c.restitution, cp + ("restitution",), "parameter", extra={"vn": vn_symbol})
+            if vn_symbol not in e.free_symbols:  # a constant law: e < 0 would send the bodies on into each other
+                self.real_value(e, cp + ("restitution",), nonnegative=True)
             mu = self.doc.parse(c.friction, cp + ("friction",), "parameter")
             self.real_value(mu, cp + ("friction",), nonnegative=True)
             entry = {"name": c.name, "restitution": e, "vn_symbol": vn_symbol, "points": [], "friction": mu,

@@ -906,6 +906,12 @@ def integrate(model: MechanicalModel, options: SimulationOptions, overrides_p: n
             time.perf_counter() - t0
         p = parameter_values(model) if overrides_p is None else overrides_p
         q0, u0, warnings = _start(model, c, p)
+        unwatched = [entry["name"] for entry in model.kin.contacts if entry["gap"] is None]
+        if unwatched:
+            warnings.append(f"contact {', '.join(repr(n) for n in unwatched)} (between two points, without a gap) is "
+                            "not watched in simulate: the bodies pass through each other; `mechsys collide` resolves "
+                            "it at a given state, and a gap or a gap primitive (point_plane, sphere_sphere, ...) makes "
+                            "it an event")
     except BaseException:
         from mechsys.numeric import native
 
