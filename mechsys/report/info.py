@@ -17,7 +17,7 @@ def render_json(info: Info) -> str:
 def _facts(info: Info) -> list[tuple[str, str]]:
     return [
         ("moving links n", str(info.moving_links)),
-        ("mobility MO = 6n - sum(6-c)p_c - loop rows", str(info.mobility)),
+        ("mobility MO, loop rows included", str(info.mobility)),
         ("prescribed coordinates L", ", ".join(info.prescribed) or "0"),
         ("DOF by formula M = MO - L", str(info.dof_formula)),
         ("free coordinates", ", ".join(info.free_coordinates) or "none"),
