@@ -83,3 +83,39 @@ def test_the_energy_test_does_not_crash_at_a_switch(tmp_path):
     assert e.stability == "undecided"
     assert problem.discontinuity(np.array([0.0]), p) is not None
     assert problem.discontinuity(np.array([0.5]), p) is None
+
+
+ABSORBER = """name: absorber
+parameters: {M1: 10.0, K1: 4000, mu: 0.1, c2: 3.0, L: 0.5}
+coordinates:
+  x1: {initial: 0, rate: 0}
+  x2: {initial: 0, rate: 0}
+ground:
+  points:
+    wall: [0, 0, 0]
+links:
+  main:
+    joint: {type: prismatic, parent: ground, axis: x, coordinate: x1, origin: [L, 0, 0]}
+    mass: M1
+  tmd:
+    joint: {type: prismatic, parent: ground, axis: x, coordinate: x2, origin: [2*L, 0, 0]}
+    mass: mu*M1
+forces:
+  - {type: spring, between: [ground.wall, main], stiffness: K1, free_length: L}
+  - {type: spring, between: [main, tmd], stiffness: mu*K1/(1+mu)**2, free_length: L}
+  - {type: damper, between: [main, tmd], coefficient: c2}
+"""
+
+
+def test_the_symbolic_linearization_prints_springs_without_their_kinks(tmp_path):
+    """--linearize printed K+N with DiracDelta(L + x1) and sign(L + x1)**2 (the derivatives of a spring's |d|):
+    0 and 1 wherever no spring has zero length, where a linearization is about. A Den Hartog absorber: K+N is
+    [[K1 + k2, -k2], [-k2, k2]], C+G the damper's c2."""
+    path = tmp_path / "absorber.yaml"
+    path.write_text(ABSORBER)
+    result = CliRunner().invoke(app, ["equilibria", str(path), "--linearize"])
+    assert result.exit_code == 0, result.output
+    text = result.output
+    assert "DiracDelta" not in text and "sign(" not in text
+    squeezed = " ".join(text.split())
+    assert "K1 + K1*mu/(1 + mu)**2" in squeezed and "-c2" in squeezed

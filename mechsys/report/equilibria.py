@@ -147,7 +147,8 @@ def symbolic_tables(mats: dict, names: list[str]) -> list[Table]:
 
     tables = []
     for key, mat in mats.items():
-        t = Table(f"{key} (about any state of rest; expressions of the coordinates)", [""] + names)
+        t = Table(f"{key} (about any state of rest where no spring has zero length; expressions of the "
+                  "coordinates)", [""] + names)
         for i, name in enumerate(names):
             t.add(name, *[to_text(mat[i, j]) for j in range(mat.shape[1])])
         tables.append(t)

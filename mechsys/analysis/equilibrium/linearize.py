@@ -224,8 +224,19 @@ def linearize(model: MechanicalModel, equilibrium: Equilibrium, p: np.ndarray | 
 
 
 def symbolic_matrices(model: MechanicalModel) -> dict[str, sp.Matrix]:
-    """M, C + G and K + N as expressions of the coordinates (rates at zero): valid about any state of rest."""
+    """M, C + G and K + N as expressions of the coordinates (rates at zero): valid about any state of rest where
+    no spring or damper has zero length. The derivatives of a length |d| leave DiracDelta(d) (0 there) and
+    sign(d)**2 (1 there); they are dropped, so a spring prints as k, not k*sign(L + x1)**2 + 2*k*(...)*DiracDelta(L
+    + x1)."""
     lp = pieces(model)
     rest = {u: 0 for u in model.u}
-    return {"M": lp.symbolic["M"], "C+G": (-lp.symbolic["dfdu"]).xreplace(rest),
+    mats = {"M": lp.symbolic["M"], "C+G": (-lp.symbolic["dfdu"]).xreplace(rest),
             "K+N": (-lp.symbolic["dfdq"]).xreplace(rest)}
+    return {key: _away_from_zero_length(m) for key, m in mats.items()}
+
+
+def _away_from_zero_length(m: sp.Matrix) -> sp.Matrix:
+    if not m.has(sp.DiracDelta, sp.sign):
+        return m
+    m = m.replace(lambda e: isinstance(e, sp.DiracDelta), lambda e: sp.Integer(0))
+    return m.replace(lambda e: e.is_Pow and isinstance(e.base, sp.sign) and e.exp.is_even, lambda e: sp.Integer(1))
