@@ -46,3 +46,14 @@ def test_each_continuum_has_its_representative(tmp_path):
     assert upright["stability"] == "unstable"
     assert sorted(re for re, _ in upright["eigenvalues"]) == pytest.approx([-rate, 0, 0, rate], abs=1e-9)
     assert "one representative of each of 2 continua" in data["message"]
+
+
+def test_roots_one_rounding_apart_are_ordered_by_their_next_coordinate():
+    """A sweep's eq1 and eq2 swapped between rows where their first coordinate differed by one ulp (0.3038 and
+    0.30379999999999996): the listing order rounds each value to 9 digits before comparing."""
+    from mechsys.analysis.equilibrium.equilibria import Equilibrium, _order
+
+    a = Equilibrium({"y1": 0.30379999999999996, "y2": 0.7057}, {}, [])
+    b = Equilibrium({"y1": 0.3038, "y2": -0.2943}, {}, [])
+    assert sorted([a, b], key=_order) == [b, a]
+    assert sorted([Equilibrium({"y1": -1.0, "y2": 5.0}, {}, []), b], key=_order)[0].coordinates["y1"] == -1.0

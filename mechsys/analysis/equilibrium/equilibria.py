@@ -936,7 +936,7 @@ def find_equilibria(model: MechanicalModel, search: dict[str, tuple[float, float
                  "number, a division by zero): no root is found there or at the edge of their domain"
                  if problem.undefined else "")
     message = "; ".join(m for m in (message, chart_note, singular_note(problem, dropped), undefined) if m)
-    equilibria.sort(key=lambda e: tuple(e.coordinates.values()) + tuple(e.rates.values()))
+    equilibria.sort(key=_order)
     if not equilibria:
         message = (f"no equilibrium found: {plan.text()}; widen it with --search" if plan is not None
                    else "no equilibrium: the equations have no real root (exhaustive search)")
@@ -944,6 +944,13 @@ def find_equilibria(model: MechanicalModel, search: dict[str, tuple[float, float
     split = getattr(problem, "split", None)
     return EquilibriaResult(equilibria, message, problem.cyclic, dict(problem.fixed_rates), plan, exact,
                             split.text() if split is not None else "", problem)
+
+
+def _order(e: Equilibrium) -> tuple:
+    """The listing order: by coordinates, then rates, each rounded to 9 significant digits first, so that roots
+    one rounding apart in a coordinate are ordered by the next one (a sweep's eq1 and eq2 swapped between rows
+    where their first coordinate differed by one ulp)."""
+    return tuple(float(f"{v:.9g}") for v in (*e.coordinates.values(), *e.rates.values()))
 
 
 def is_isolated(problem: EquilibriumProblem, z: np.ndarray, p: np.ndarray) -> bool:
