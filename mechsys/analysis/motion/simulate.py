@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING, Any, Callable
 import numpy as np
 
 from mechsys.errors import AnalysisError, InputError
-from mechsys.numeric.native import budget_spent
+from mechsys.numeric.native import BUDGET_SPENT, budget_spent
 
 if TYPE_CHECKING:  # sympy and the model are imported only where used: a warm run (motion/warm.py) needs neither
     import pandas as pd
@@ -326,6 +326,38 @@ class RightHandSide:
         sol = np.linalg.lstsq(K, rhs, rcond=None)[0] if np.linalg.cond(K) > 1e14 else np.linalg.solve(K, rhs)
         return sol[:n], -sol[n:]
 
+    def _why_slow(self) -> str:
+        """budget_spent's causes, or, for an implicit method where the fast motion here only decays (no eigenvalue
+        of the linearized motion within 1e3 of the fastest oscillates), the round-off of the stiff forces: a stiff, heavily damped spring (k =
+        1e12, c = 1e7) turns the coordinates' round-off into velocity errors above --atol 1e-12, and CVODE cut
+        its steps to 1e-9 s; the message blamed undamped oscillations and suggested the explicit method."""
+        from mechsys.numeric.native import IMPLICIT_METHODS
+
+        latest = getattr(self, "latest", None)
+        if self.method not in IMPLICIT_METHODS or latest is None or self.c.m or self.persistent:
+            return budget_spent(self.method)
+        t, y = latest
+        n = self.c.n
+        with np.errstate(all="ignore"):
+            a0 = self.accelerations(t, y[:n], y[n:])[0]
+            J = np.zeros((2 * n, 2 * n))
+            J[:n, n:] = np.eye(n)
+            for k in range(2 * n):
+                h = 1e-7 * (1 + abs(y[k]))
+                z = y.copy()
+                z[k] += h
+                J[n:, k] = (self.accelerations(t, z[:n], z[n:])[0] - a0) / h
+            lam = np.linalg.eigvals(J) if np.all(np.isfinite(J)) else np.zeros(0)
+        fastest = float(np.max(np.abs(lam))) if lam.size else 0.0
+        fast = lam[np.abs(lam) > 1e-3 * fastest]  # the eigenvalues that bound an implicit method's steps
+        if not fast.size or np.any(np.abs(fast.imag) > 0.1 * np.abs(fast)):
+            return budget_spent(self.method)
+        floor = np.finfo(float).eps * max(1.0, float(np.max(np.abs(y[:n])))) * fastest
+        return (f"{BUDGET_SPENT}: the fast motion here only decays (no fast eigenvalue of its linearization "
+                f"oscillates; the fastest decays at {fastest:.3g} 1/s), so {self.method}'s steps are limited by the tolerances: the "
+                f"stiff forces turn the round-off of the coordinates into rates off by about {floor:.1g} per unit "
+                "time, which --atol and --rtol must not ask below; loosen them (e.g. --atol 1e-9 --rtol 1e-8)")
+
     def _check_pace(self) -> None:
         """Stop now when the pace of the last SLOW_WINDOWS windows of BUDGET_WINDOW evaluations would each spend the
         budget before t_end: a chattering law or a stiff scene on an explicit method then fails in seconds, not
@@ -339,7 +371,7 @@ class RightHandSide:
         if self.slow_windows >= SLOW_WINDOWS:
             pace = f"advanced {progress:.3g} s; at that pace the remaining {remaining:.3g} s would need about " \
                 f"{needed:.3g} evaluations" if progress > 0 else "did not advance the time at all"
-            raise AnalysisError(f"integration stopped at t = {self.front:.6g}: {budget_spent(self.method)} (the last "
+            raise AnalysisError(f"integration stopped at t = {self.front:.6g}: {self._why_slow()} (the last "
                                 f"{BUDGET_WINDOW} right-hand-side evaluations {pace}, with "
                                 f"{self.max_calls - self.calls:.3g} left of the budget of {self.max_calls:.3g}; "
                                 "raise --max-steps if the run is only slow to start)")
@@ -348,6 +380,8 @@ class RightHandSide:
         self.calls += 1
         if self.calls > self.max_calls:
             raise AnalysisError(f"integration stopped at t = {t:.6g}: {budget_spent(self.method)}")
+        if t >= self.front:
+            self.latest = (t, y)
         self.front = max(self.front, t)
         if self.window_front is None:
             self.window_front = t
