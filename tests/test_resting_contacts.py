@@ -111,16 +111,22 @@ contacts:
 """
 
 
+def _run_with_impacts(tmp_path, text: str, t_end: str):
+    """simulate the model ``text`` to t_end with its rows and its impact table written: (result, rows, impacts)."""
+    model = tmp_path / "model.yaml"
+    model.write_text(text)
+    rows, hits = tmp_path / "run.csv", tmp_path / "impacts.csv"
+    result = CliRunner().invoke(app, ["simulate", str(model), "--t-end", t_end, "-o", str(rows), "--impacts",
+                                      str(hits), "-f", "json"])
+    assert result.exit_code == 0, result.output
+    return result, rows, hits
+
+
 def test_a_ball_struck_while_it_rests_on_the_floor_stays_on_it(tmp_path):
     """Ball B (e = 1) dropped from h onto ball A resting on the floor: A carries B's impulse into the floor, which
     returns it; B leaves at +sqrt(2 g h) and A stays at rest. Before, the resting contact was left out of the
     impact: A went on at -4.43 m/s and ended 3.3 m below the floor, exit 0."""
-    model = tmp_path / "stack.yaml"
-    model.write_text(STACK)
-    rows, hits = tmp_path / "run.csv", tmp_path / "impacts.csv"
-    result = CliRunner().invoke(app, ["simulate", str(model), "--t-end", "1.2", "-o", str(rows), "--impacts",
-                                      str(hits), "-f", "json"])
-    assert result.exit_code == 0, result.output
+    result, rows, hits = _run_with_impacts(tmp_path, STACK, "1.2")
     g, h = 9.81, 1.0
     t1, v = math.sqrt(2 * h / g), math.sqrt(2 * g * h)
     table = list(csv.DictReader(hits.open()))
@@ -189,12 +195,7 @@ def _rocking_reference(count: int) -> list[tuple[float, float]]:
 def test_a_rocking_block_releases_its_old_pivot_when_the_other_corner_lands(tmp_path):
     """Before, the old pivot corner stayed a constraint row after the other corner landed: the block tipped over,
     sank 0.52 m through the floor and gained 75 J, exit 0."""
-    model = tmp_path / "rocking.yaml"
-    model.write_text(ROCKING)
-    rows, hits = tmp_path / "run.csv", tmp_path / "impacts.csv"
-    result = CliRunner().invoke(app, ["simulate", str(model), "--t-end", "1", "-o", str(rows), "--impacts",
-                                      str(hits), "-f", "json"])
-    assert result.exit_code == 0, result.output
+    result, rows, hits = _run_with_impacts(tmp_path, ROCKING, "1")
     table = list(csv.DictReader(hits.open()))
     for row, (t, impulse) in zip(table, _rocking_reference(5)):
         assert float(row["t"]) == pytest.approx(t, rel=1e-7)
