@@ -504,3 +504,19 @@ def test_reference_sleeping_top_threshold_and_intermediate_axis_rate():
     assert np.max(lam.real) == pytest.approx(ref.intermediate_axis_growth(SPIN_W, I1, I2, I3), rel=1e-9)
     lam = body.reduced_eigenvalues({}, {"psi": SPIN_W}, ["psi"])                       # body z vertical
     assert np.min(np.abs(lam - 1j * SPIN_W * math.sqrt(spin_rate_constant((I1, I2, I3), 2)))) < 1e-9
+
+
+def test_a_precession_branch_born_at_a_gimbal_lock_is_swept():
+    """Heavy top in zxz angles at spin der(phi) = 40, swept over der(psi) = 40..65: the steady precession branch leaves
+    the sleeping top (theta = 0, a gimbal lock of zxz) at der(psi) = 50.07 and follows cos(theta) = (C phi' psi' -
+    m g l)/((A - C) psi'^2), A = A0 + m l^2 about the pivot. It was dropped as 'a twin in other angles' of the
+    sleeping top: compared at the first parameter value both reached, the branch point, where they are one motion."""
+    result = runner.invoke(app, ["equilibria", str(BEYOND / "top_zxz.yaml"), "--set", "der(psi)=65", "--set",
+                                 "der(phi)=40", "--sweep", "der(psi)=40:65:26", "-f", "csv"])
+    assert result.exit_code == 0, result.output
+    A, C, mgl = 0.004 + 1.0 * 0.1**2, 0.008, 1.0 * 9.81 * 0.1
+    tilted = [r for r in csv.DictReader(io.StringIO(result.output)) if 1e-6 < abs(float(r["theta"])) < math.pi - 1e-6]
+    assert len(tilted) >= 10 and max(float(r["der(psi)"]) for r in tilted) == 65.0
+    for r in tilted:
+        w = float(r["der(psi)"])
+        assert abs(float(r["theta"])) == pytest.approx(math.acos((C * 40 * w - mgl) / ((A - C) * w * w)), abs=1e-8)

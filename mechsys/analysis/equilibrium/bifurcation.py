@@ -467,20 +467,23 @@ def _review(problem: EquilibriumProblem, branches: list[Branch], at, name: str) 
 
 
 def _same_family(problem: EquilibriumProblem, a: Branch, b: Branch, at, memo: dict | None = None) -> bool:
-    """``b`` is ``a`` in other coordinates (a rotation sequence reaches every orientation twice): at a parameter
-    value both reached, the same physical steady motion."""
+    """``b`` is ``a`` in other coordinates (a rotation sequence reaches every orientation twice): at the parameter
+    values both reached (up to five, spread over them), the same physical steady motion. One value is not enough:
+    a branch leaving another at a branch point is the same motion there, and a heavy top's steady precession
+    branch, born from the sleeping top at a gimbal lock of its zxz angles, was dropped as a twin of it."""
     from mechsys.analysis.equilibrium.charts import same_motion
 
     if not a.points or not b.points:
         return False
-    # the first point of b (in order) at a parameter value a reached, and the first such point of a
+    # the points of b (in order) at parameter values a reached, each with the first such point of a
     pa_, pb_ = np.array([pt.p for pt in a.points]), np.array([pt.p for pt in b.points])
     hit = np.abs(pb_[:, None] - pa_[None, :]) <= 1e-12 * (1 + np.abs(pb_))[:, None]
     rows = np.flatnonzero(hit.any(axis=1))
     if not rows.size:
         return False
-    pb, pa = b.points[rows[0]], a.points[int(np.argmax(hit[rows[0]]))]
-    return same_motion(problem, problem.equilibrium(pa.x), problem.equilibrium(pb.x), at(pb.p), memo)
+    picks = rows[np.unique(np.linspace(0, len(rows) - 1, min(5, len(rows))).round().astype(int))]
+    return all(same_motion(problem, problem.equilibrium(a.points[int(np.argmax(hit[r]))].x),
+                           problem.equilibrium(b.points[r].x), at(b.points[r].p), memo) for r in picks)
 
 
 def _merge_events(events: list[dict], angles: list[bool], step: float) -> list[dict]:
