@@ -14,6 +14,7 @@ import json
 import math
 from pathlib import Path
 
+import numpy as np
 import pytest
 from typer.testing import CliRunner
 
@@ -85,3 +86,30 @@ def test_the_note_survives_the_stored_search(tmp_path, monkeypatch):
     monkeypatch.setenv("MECHSYS_CACHE", "off")
     off = find_equilibria(mechsys.load(path)).message
     assert first == second == off and UNDEFINED in first
+
+
+def test_a_stiff_chains_soft_mode_is_not_called_rigid():
+    """Six masses tied to a wall by springs of 1 to 1e8: K is positive definite, so no mode is rigid. The bound of
+    1e-9 of the largest omega^2 called the first mode (0.450316 rad/s, 31,600 times below the highest) rigid, with
+    frequency 0 and damping 0, exit 0. Checked against eigh of the chain's own K and M, and the modal damping
+    phi^T C phi / (2 omega) of its dampers."""
+    import scipy.linalg as sla
+
+    path = Path(__file__).resolve().parent / "data" / "beyond" / "stiff_chain.yaml"
+    result = CliRunner().invoke(app, ["modes", str(path), "-f", "json"])
+    assert result.exit_code == 0, result.output
+    modes = json.loads(result.output)["modes"]
+    m = np.array([1, 0.5, 2, 0.1, 1, 0.3])
+    k = np.array([1, 1e2, 1e4, 1e6, 1e8, 1e3])
+    c = np.array([0.05, 0.5, 5, 200, 2e4, 0.2])
+
+    def chain(s):  # element i joins mass i-1 (the wall for i = 0) and mass i
+        out = np.diag(s + np.append(s[1:], 0.0))
+        out -= np.diag(s[1:], 1) + np.diag(s[1:], -1)
+        return out
+
+    w2, phi = sla.eigh(chain(k), np.diag(m))
+    assert [mode["rigid_body"] for mode in modes] == [False] * 6
+    assert [mode["frequency_rad_s"] for mode in modes] == pytest.approx(np.sqrt(w2).tolist(), rel=1e-8)
+    zeta = [float(phi[:, i] @ chain(c) @ phi[:, i]) / (2 * math.sqrt(w2[i])) for i in range(6)]
+    assert [mode["damping_ratio"] for mode in modes] == pytest.approx(zeta, rel=1e-6)
