@@ -77,3 +77,29 @@ def test_bench_takes_the_output_interval_which_no_longer_sets_the_step():
     assert calls[0][1] > 2 * calls[0][0], calls  # tighter rtol, more work: the table responds
     bad = invoke(*args, "--dt", 0)
     assert bad.exit_code == 2 and "--dt" in bad.output
+
+
+def test_bench_falls_back_to_an_implicit_reference_when_dop853_cannot_finish(monkeypatch):
+    """A stiff scene spends DOP853's step budget at rtol 1e-13: bench stopped before any method ran, advising
+    --method, which bench does not have. The reference is then CVODE at 1e-12 (Radau without SUNDIALS), named in
+    the table's title and a note. Here DOP853's failure is simulated; the methods' errors are against the
+    fallback's result."""
+    from mechsys.analysis.motion import workprecision
+    from mechsys.errors import AnalysisError
+
+    real = workprecision.simulate
+
+    def stiff_for_dop853(model, t_end, dt, method, **kw):
+        if method == "DOP853" and kw.get("rtol") == 1e-13:
+            raise AnalysisError("integration stopped at t = 0.04: the step budget (--max-steps) is spent: a stiff "
+                                "scene (try --method Radau or CVODE)")
+        return real(model, t_end, dt, method, **kw)
+
+    monkeypatch.setattr(workprecision, "simulate", stiff_for_dop853)
+    r = invoke("bench", ROOT / "systems" / "double_pendulum.yaml", "--t-end", 0.2, "--methods", "native",
+               "--rtols", "1e-8", "-f", "json")
+    assert r.exit_code == 0, r.output
+    data = json.loads(r.stdout)
+    (title,) = [k for k in data if k.startswith("work-precision")]
+    assert title in ("work-precision (reference: CVODE, rtol 1e-12)", "work-precision (reference: Radau, rtol 1e-12)")
+    assert data[title][0]["final error"] < 1e-6
