@@ -150,7 +150,9 @@ def test_a_forked_sweep_of_the_indicator_equals_the_serial_one(forked):
         results[workers] = sweep(model, "omega1", -30.0, 30.0, 61)
     a, b = results[1], results[2]
     _branches_equal(a.branches, b.branches)
-    assert a.bifurcations == b.bifurcations and a.notes == b.notes and len(a.branches) == 4
+    # beta = 0, pi, the nontrivial loop through beta = +-pi (traced twice: once kept), and the two halves +-beta of
+    # the pair born at omega1 = 10 (the -beta half was dropped as a 'twin' compared at beta = pi alone)
+    assert a.bifurcations == b.bifurcations and a.notes == b.notes and len(a.branches) == 5
 
 
 @pytest.mark.parametrize("workers", [1, 2])

@@ -467,23 +467,24 @@ def _review(problem: EquilibriumProblem, branches: list[Branch], at, name: str) 
 
 
 def _same_family(problem: EquilibriumProblem, a: Branch, b: Branch, at, memo: dict | None = None) -> bool:
-    """``b`` is ``a`` in other coordinates (a rotation sequence reaches every orientation twice): at the parameter
-    values both reached (up to five, spread over them), the same physical steady motion. One value is not enough:
+    """``b`` is ``a`` in other coordinates (a rotation sequence reaches every orientation twice): at the first and
+    the last of b's points at parameter values a reached, the same physical steady motion. One value is not enough:
     a branch leaving another at a branch point is the same motion there, and a heavy top's steady precession
     branch, born from the sleeping top at a gimbal lock of its zxz angles, was dropped as a twin of it."""
     from mechsys.analysis.equilibrium.charts import same_motion
 
     if not a.points or not b.points:
         return False
-    # the points of b (in order) at parameter values a reached, each with the first such point of a
+    # the points of b (in order) at parameter values a reached, and a's points there
     pa_, pb_ = np.array([pt.p for pt in a.points]), np.array([pt.p for pt in b.points])
     hit = np.abs(pb_[:, None] - pa_[None, :]) <= 1e-12 * (1 + np.abs(pb_))[:, None]
     rows = np.flatnonzero(hit.any(axis=1))
     if not rows.size:
         return False
-    picks = rows[np.unique(np.linspace(0, len(rows) - 1, min(5, len(rows))).round().astype(int))]
-    return all(same_motion(problem, problem.equilibrium(a.points[int(np.argmax(hit[r]))].x),
-                           problem.equilibrium(b.points[r].x), at(b.points[r].p), memo) for r in picks)
+    picks = rows[[0, -1]]  # where b meets a first and last (a branch point alone is not enough)
+    # a branch that folds back reaches a parameter value twice: b's point matches either of a's there
+    return all(any(same_motion(problem, problem.equilibrium(a.points[int(j)].x), problem.equilibrium(b.points[r].x),
+                               at(b.points[r].p), memo) for j in np.flatnonzero(hit[r])) for r in picks)
 
 
 def _merge_events(events: list[dict], angles: list[bool], step: float) -> list[dict]:
