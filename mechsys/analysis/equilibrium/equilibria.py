@@ -980,7 +980,7 @@ def _motions(problem: EquilibriumProblem, z: np.ndarray, p: np.ndarray) -> np.nd
     moves = null[:, : problem.nq + len(problem.rate_unknowns)]
     if not moves.size:
         return moves
-    U, S, Wt = np.linalg.svd(moves, full_matrices=False)
+    _, S, Wt = np.linalg.svd(moves, full_matrices=False)
     return Wt[S > 1e-6 * max(float(np.max(np.linalg.norm(null, axis=1))), 1e-300)]
 
 

@@ -12,8 +12,8 @@ if TYPE_CHECKING:
 UNBALANCED = ("the closed loops are at or near a singular configuration (a change point, where their constraints lose "
               "rank) and the forces have a part along the motion they lose there")
 #: why a rest at a singular configuration gets no verdict (branch_point)
-BRANCHES = ("at a singular configuration of the closed loops (their constraint Jacobian has rank {here} here, {generic} "
-            "elsewhere: assembly branches meet): the linearization does not decide")
+BRANCHES = ("at a singular configuration of the closed loops (their constraint Jacobian has rank {here} here, "
+            "{generic} elsewhere: assembly branches meet): the linearization does not decide")
 #: a singular value of the constraint Jacobian below this fraction of its largest counts as lost: the root is within
 #: about 1e-4 of a configuration where the rank drops, closer than Newton's 1e-6 to 1e-5 accuracy there
 NEAR = 1e-4

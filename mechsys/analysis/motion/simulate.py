@@ -328,9 +328,10 @@ class RightHandSide:
 
     def _why_slow(self) -> str:
         """budget_spent's causes, or, for an implicit method where the fast motion here only decays (no eigenvalue
-        of the linearized motion within 1e3 of the fastest oscillates), the round-off of the stiff forces: a stiff, heavily damped spring (k =
-        1e12, c = 1e7) turns the coordinates' round-off into velocity errors above --atol 1e-12, and CVODE cut
-        its steps to 1e-9 s; the message blamed undamped oscillations and suggested the explicit method."""
+        of the linearized motion within 1e3 of the fastest oscillates), the round-off of the stiff forces: a
+        stiff, heavily damped spring (k = 1e12, c = 1e7) turns the coordinates' round-off into velocity errors
+        above --atol 1e-12, and CVODE cut its steps to 1e-9 s; the message blamed undamped oscillations and
+        suggested the explicit method."""
         from mechsys.numeric.native import IMPLICIT_METHODS
 
         latest = getattr(self, "latest", None)
@@ -354,9 +355,10 @@ class RightHandSide:
             return budget_spent(self.method)
         floor = np.finfo(float).eps * max(1.0, float(np.max(np.abs(y[:n])))) * fastest
         return (f"{BUDGET_SPENT}: the fast motion here only decays (no fast eigenvalue of its linearization "
-                f"oscillates; the fastest decays at {fastest:.3g} 1/s), so {self.method}'s steps are limited by the tolerances: the "
-                f"stiff forces turn the round-off of the coordinates into rates off by about {floor:.1g} per unit "
-                "time, which --atol and --rtol must not ask below; loosen them (e.g. --atol 1e-9 --rtol 1e-8)")
+                f"oscillates; the fastest decays at {fastest:.3g} 1/s), so {self.method}'s steps are limited by "
+                f"the tolerances: the stiff forces turn the round-off of the coordinates into rates off by about "
+                f"{floor:.1g} per unit time, which --atol and --rtol must not ask below; loosen them (e.g. --atol "
+                "1e-9 --rtol 1e-8)")
 
     def _check_pace(self) -> None:
         """Stop now when the pace of the last SLOW_WINDOWS windows of BUDGET_WINDOW evaluations would each spend the
