@@ -81,3 +81,34 @@ def test_a_search_that_walks_sets_in_another_order_is_caught(tmp_path, monkeypat
     monkeypatch.setattr(fast, "sorted", largest_first, raising=False)
     with pytest.raises(AssertionError):
         _same(exprs)
+
+
+SPHERICAL_CHAIN = """\
+name: boxes on spherical joints
+parameters: {{m: 0.7, l: 0.5, a: 0.06, b: 0.1, g: 9.81}}
+coordinates:
+{coordinates}
+links:
+{links}
+forces:
+  - {{type: gravity, acceleration: [0, 0, -g]}}
+"""
+
+
+def test_a_spherical_chains_staged_pieces_give_sympys_cse(tmp_path):
+    """The expressions a first `simulate` compiles for a chain of boxes on spherical joints: equal subtrees built
+    apart, which cse now meets interned (one object per value) with sympy's cache cleared; the temporaries are
+    sympy's own, term for term."""
+    from mechsys.numeric.kane import model_pieces
+
+    n = 4
+    coordinates = "\n".join(f"  {a}{i}: {{initial: {0.1 * i:.1f}, rate: 0.2}}" for i in range(1, n + 1) for a in "zyx")
+    links = "\n".join(
+        f"  b{i}:\n    joint: {{type: spherical, parent: {'ground' if i == 1 else f'b{i - 1}'}, sequence: zyx, "
+        f"coordinates: [z{i}, y{i}, x{i}]{'' if i == 1 else ', origin: [0, 0, -l]'}}}\n"
+        f"    mass: m\n    center_of_mass: [0, 0, -l/2]\n    shape: {{box: {{size: [a, b, l]}}}}"
+        for i in range(1, n + 1))
+    path = tmp_path / "boxes.yaml"
+    path.write_text(SPHERICAL_CHAIN.format(coordinates=coordinates, links=links), encoding="utf-8")
+    pieces, _layout = model_pieces(mechsys.load(path))
+    _same([sp.sympify(e) for e in pieces])
