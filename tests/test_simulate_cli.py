@@ -103,3 +103,31 @@ def test_bench_falls_back_to_an_implicit_reference_when_dop853_cannot_finish(mon
     (title,) = [k for k in data if k.startswith("work-precision")]
     assert title in ("work-precision (reference: CVODE, rtol 1e-12)", "work-precision (reference: Radau, rtol 1e-12)")
     assert data[title][0]["final error"] < 1e-6
+
+
+OSCILLATOR = """\
+name: mass on a spring
+parameters: {m: 2, k: 18}
+coordinates:
+  x: {initial: 0.1, rate: 0}
+links:
+  block: {joint: {type: prismatic, parent: ground, axis: x, coordinate: x}, mass: m}
+forces:
+  - {type: torsional_spring, coordinate: x, stiffness: k, free_angle: 0}  # any coordinate, angular or not
+"""
+
+
+def test_a_t_end_that_is_not_a_whole_number_of_dt_still_ends_at_t_end(tmp_path):
+    """--t-end 1 --dt 0.3 ended at 0.9 and called that row t_end; the last interval is now the remainder 0.1, and
+    the final state is the closed form x = x0 cos(3 t) at t = 1 (every method)."""
+    (tmp_path / "spring.yaml").write_text(OSCILLATOR, encoding="utf-8")
+    for method in ("native", "DOP853", "Radau"):
+        out = tmp_path / f"{method}.csv"
+        r = invoke("simulate", tmp_path / "spring.yaml", "--t-end", 1, "--dt", 0.3, "--method", method, "-o", out,
+                   "-f", "json")
+        assert r.exit_code == 0, r.output
+        rows = np.array([[float(x) for x in ln.split(",")] for ln in out.read_text().splitlines()[1:]])
+        assert np.allclose(rows[:, 0], [0, 0.3, 0.6, 0.9, 1.0], rtol=0, atol=1e-15)
+        assert abs(rows[-1, 1] - 0.1 * np.cos(3.0)) < 1e-8
+        summary = json.loads(r.stdout)["simulation summary"]
+        assert abs(summary["x(t_end)"] - 0.1 * np.cos(3.0)) < 1e-6

@@ -1,6 +1,7 @@
 """Forward dynamics: compiled equations, scipy integrators (auto stiffness choice), constraint projection, energies."""
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, field
 
@@ -721,11 +722,17 @@ def inner_rows(c: Compiled, p: np.ndarray, t: np.ndarray, Y: np.ndarray, rtol: f
 
 
 def output_grid(t_end: float, dt: float | None) -> np.ndarray:
-    """Output times 0, dt, 2 dt, ..., t_end (default dt = t_end/1000)."""
+    """Output times 0, dt, 2 dt, ..., t_end (default dt = t_end/1000). When t_end is not a whole number of dt
+    (beyond rounding) the last interval is the shorter remainder, so the run still ends at t_end (it ended at the
+    last whole multiple: --t-end 1 --dt 0.3 stopped at 0.9 and reported that state as the final one)."""
     dt = dt or t_end / 1000
-    grid = np.arange(0.0, t_end + 0.5 * dt, dt)
-    grid[-1] = min(grid[-1], t_end)
-    return grid
+    ratio = t_end / dt
+    k = round(ratio)
+    if abs(ratio - k) <= 1e-9 * max(1.0, ratio):
+        grid = np.arange(0.0, t_end + 0.5 * dt, dt)
+        grid[-1] = min(grid[-1], t_end)
+        return grid
+    return np.append(np.arange(math.floor(ratio) + 1) * dt, t_end)
 
 
 def constraint_residual(c: Compiled, p: np.ndarray, grid: np.ndarray, q: np.ndarray, u: np.ndarray) -> np.ndarray:
