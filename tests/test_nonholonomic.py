@@ -381,3 +381,20 @@ def test_with_a_compiler_the_pieces_store_no_python_and_make_it_when_asked(tmp_p
                                    rtol=1e-13, atol=1e-13)
         np.testing.assert_allclose(pieces._native("mechsys_values", args),
                                    np.asarray(pieces._values(*args), dtype=float), rtol=1e-13, atol=1e-13)
+
+
+@pytest.mark.parametrize("frame, key", [("", "link"), (", frame: disk", "frame")])
+def test_a_contact_given_in_axes_that_spin_with_the_body_is_refused(tmp_path, frame, key):
+    """The rolling disk with `frame` left out (the default: the disk itself) or set to the disk: the contact
+    vector [0, 0, -r] then turns with the disk, a point of the rim whose rows pin it. It 'rolled' 0.25 m where
+    the disk rolls r der(spin) t = 2 m, with exit 0; now one line at the constraint (the file's own disk, with
+    its non-spinning lean frame, covers the 2 m: its `expect` in systems/rolling_disk.yaml)."""
+    text = DISK.read_text(encoding="utf-8").replace(", frame: lean_link", frame)
+    assert text != DISK.read_text(encoding="utf-8")
+    path = tmp_path / "disk.yaml"
+    path.write_text(text, encoding="utf-8")
+    r = runner.invoke(app, ["simulate", str(path), "--t-end", "2"])
+    assert r.exit_code == 2
+    (line,) = r.output.strip().splitlines()
+    assert f"constraints[0].{key}: the contact vector is given in axes that turn with 'disk'" in line
+    assert line.startswith(f"{path}:33:")

@@ -450,6 +450,17 @@ class Builder:
         body = self.frame(c.link, cp + ("link",))
         axes = self.frame(c.frame or c.link, cp + ("frame",))
         r_rel = axes.R * self.doc.parse_vec(c.contact, cp + ("contact",))
+        turning = (axes.omega_ground - body.omega_ground).cross(r_rel)
+        if all(self.vanishes(e, f"{name}.frame") for e in turning):
+            # a contact vector that turns with the link is a material point of it: rows that hold its velocity are
+            # the derivatives of its position, a pin (the spinning disk of the default frame 'rolled' 0.25 m of 2)
+            raise self.doc.error(cp + ("frame",) if c.frame else cp + ("link",),
+                                 f"the contact vector is given in axes that turn with '{c.link}' "
+                                 f"({'frame' if c.frame else 'the default frame, the link itself'}), so it is a point "
+                                 f"fixed in the link, not the contact: its rows would pin that point. Give 'frame' a "
+                                 f"link in whose axes the contact stays the same vector as the body rolls (for a disk or "
+                                 f"wheel a frame that leans with it but does not spin, for a ball 'ground'); to pin a "
+                                 f"point, use point_on_point or point_on_plane")
         contact = body.origin + r_rel
         v_link = body.home_R * body.v + body.omega_ground.cross(r_rel)
         surface = self.frame(c.on, cp + ("on",))

@@ -228,7 +228,8 @@ class Rolling(Strict):
     name: str | None = None
     link: str
     contact: Vec3 = Field(description="contact point relative to the link origin, in 'frame' axes")
-    frame: str | None = Field(None, description="axes of 'contact' (a link or ground); default the link")
+    frame: str | None = Field(None, description="axes of 'contact' (a link or ground) that do not turn with the link: "
+                                                "for a disk a frame that leans but does not spin, for a ball ground")
     on: str = Field("ground", description="the link rolled on")
     components: list[Literal["x", "y", "z"]] = Field(default_factory=lambda: ["x", "y", "z"],
                                                       description="velocity components (in ground axes)")
