@@ -587,7 +587,10 @@ def modes(
                              "A and B")
         tables = rep.modes_tables(result)
         payload = result.to_dict()
-        inp = frf_input or result.coordinates[0]
+        if not result.coordinates and (frf_range is not None or state_space or transfer):
+            raise InputError("--frf, --state-space and --transfer need a coordinate that vibrates; this steady "
+                             "motion has none (every coordinate is cyclic or fixed by the constraints)")
+        inp = frf_input or (result.coordinates[0] if result.coordinates else None)
         out = frf_output or inp
         if frf_range is not None:
             import numpy as np

@@ -398,3 +398,21 @@ def test_a_contact_given_in_axes_that_spin_with_the_body_is_refused(tmp_path, fr
     (line,) = r.output.strip().splitlines()
     assert f"constraints[0].{key}: the contact vector is given in axes that turn with 'disk'" in line
     assert line.startswith(f"{path}:33:")
+
+
+def test_modes_of_a_steady_motion_without_shape_coordinates():
+    """A two-wheel robot running straight at v = 0.5 m/s (tests/data/beyond/diffdrive.yaml, written from the docs):
+    every coordinate is cyclic, so its one mode is of the speeds: the heading rate decays at m_b d v / J with
+    J = m_b d^2 + Izb + 2 mw b^2 + 2 Id + 2 Ia b^2 / r^2 (the reduced equations by hand: J w' + m_b d v w = 0).
+    `modes` raised IndexError; now the table and a note, and --frf says why it has nothing to respond."""
+    path = DATA_DIR / "beyond" / "diffdrive.yaml"
+    out = cli_json("modes", str(path), "--set", "tauL=0", "--set", "tauR=0")
+    mb, Izb, d, mw, r, b, v = 4.0, 0.12, 0.1, 0.5, 0.08, 0.2, 0.5
+    J = mb * d**2 + Izb + 2 * mw * b**2 + 2 * mw * r**2 / 4 + 2 * (mw * r**2 / 2) * b**2 / r**2
+    assert out["coordinates"] == []
+    (mode,) = out["modes"]
+    assert mode["frequency_rad_s"] == pytest.approx(mb * d * v / J, rel=1e-9)
+    text = runner.invoke(app, ["modes", str(path), "--set", "tauL=0", "--set", "tauR=0"])
+    assert text.exit_code == 0 and "no shape coordinates" in text.output
+    frf = runner.invoke(app, ["modes", str(path), "--set", "tauL=0", "--set", "tauR=0", "--frf", "0:1:3"])
+    assert frf.exit_code == 2 and "--frf" in frf.output and "Traceback" not in frf.output

@@ -183,6 +183,10 @@ def modes_tables(modes: Modes) -> list[Table]:
         t.notes.append(modes.note)
     if modes.coupling:
         t.notes.append(modes.coupling)
+    if not modes.coordinates:  # e.g. a two-wheel robot's steady run: its modes are of the speeds alone
+        t.notes.append("no shape coordinates: every coordinate is cyclic or fixed by the constraints, so these modes "
+                       "are perturbations of the steady speeds alone (`mechsys equilibria --linearize` prints A and B)")
+        return [t]
     return [t, s]
 
 
