@@ -74,6 +74,8 @@ class Compiled:
     Q: object = None  # generalized forces not derived from V (their power is the non-conservative work rate)
     Q_zero: bool = True  # Q vanishes identically
     rheonomic_rows: bool = False  # some constraint row depends on t explicitly (drives, moving surfaces)
+    explicit_time: bool = False  # T or V depends on t explicitly (a moving joint origin, a spring's setting in t)
+    Lt: object = None  # the partial derivative of L = T - V in t (with explicit_time)
 
 
 @dataclass
@@ -127,6 +129,7 @@ def _compiled_from(desc: dict) -> Compiled | None:
         out.gap_names = [str(x) for x in desc["gap_names"]]
         out.Q = matrix_from_source(desc["Q"])
         out.Q_zero, out.rheonomic_rows = bool(desc["Q_zero"]), bool(desc["rheonomic_rows"])
+        out.Lt, out.explicit_time = matrix_from_source(desc["Lt"]), bool(desc["explicit_time"])
     except (KeyError, TypeError, ValueError, SyntaxError):
         return None
     n, m = out.n, out.m
@@ -152,8 +155,13 @@ def compile_model(model: MechanicalModel) -> Compiled:
     desc = cache.load(key)
     out = _compiled_from(desc) if desc is not None else None
     if out is None:
+        from mechsys.mechanics.dag import FreeSymbols
+
         args = (model.t, model.q, model.u, model.parameter_symbols)
         hol = model.holonomic_constraints if model.holonomic_constraints.shape[0] else sp.zeros(0, 1)
+        T, V = model.kinetic_energy, model.potential_energy
+        symbols = FreeSymbols()
+        explicit = symbols.has(T, model.t) or symbols.has(V, model.t)
         desc = {
             "eqs": equations_source(model),
             "A": matrix_source(model.constraint_jacobian, *args),
@@ -170,6 +178,8 @@ def compile_model(model: MechanicalModel) -> Compiled:
             "Q_zero": all(e == 0 for e in model.generalized_forces),
             "rheonomic_rows": any(sp.sympify(c.velocity).xreplace({u: 0 for u in model.u}) != 0
                                   for c in model.kin.constraints),  # a_t != 0: the row moves by itself
+            "explicit_time": explicit,
+            "Lt": matrix_source(sp.Matrix([sp.diff(T - V, model.t) if explicit else 0]), *args),
         }
         cache.store(key, desc)
         out = _compiled_from(desc)
@@ -439,10 +449,18 @@ def nonconservative_work(c: Compiled, p: np.ndarray, grid: np.ndarray, q: np.nda
     forces of rows that depend on t (lambda . A q': drives, moving surfaces; a scleronomic row does no work), by
     a fourth-order quadrature on the output grid (_cumulative_integral; across an
     impact the power jumps, and the impact's own energy change is reported apart). None for a run whose forces
-    are all conservative. ``lams``: the multipliers at the output times when the caller has them."""
-    if c.Q is None or (c.Q_zero and not (c.rheonomic_rows and c.m)):
+    are all conservative. ``lams``: the multipliers at the output times when the caller has them.
+
+    With T or V explicit in t (a joint origin or a spring setting that moves with time) also the work of what moves
+    them: Lagrange's equations times q' give dh/dt = Q . q' + lambda . A q' - dL/dt (partial), h = T2 - T0 + V
+    the Jacobi integral, E = h + T1 + 2 T0 (T1, T0: the parts of T linear in and free of the rates), so that work is
+    the integral of -dL/dt plus the change of T1 + 2 T0 (T(u) - T(-u))/2 + 2 T(0), read at each row."""
+    explicit = getattr(c, "explicit_time", False)
+    if c.Q is None or (c.Q_zero and not (c.rheonomic_rows and c.m) and not explicit):
         return None
     power = np.zeros(len(grid))
+    if explicit:
+        power -= np.array([float(c.Lt(t, qi, ui, p)[0, 0]) for t, qi, ui in zip(grid, q, u)])
     if not c.Q_zero:
         power += np.array([float(np.ravel(c.Q(t, qi, ui, p)) @ ui) for t, qi, ui in zip(grid, q, u)])
     if c.rheonomic_rows and c.m:
@@ -453,6 +471,11 @@ def nonconservative_work(c: Compiled, p: np.ndarray, grid: np.ndarray, q: np.nda
     work = _cumulative_integral(grid, power)
     coarse = _cumulative_integral(grid[::2], power[::2])  # Richardson: the error of the fine rule is ~ 1/15 of
     work.quadrature_error = float(np.max(np.abs(work[::2] - coarse))) / 15  # the difference (fourth order)
+    if explicit:
+        def T(t, qi, ui):
+            return float(c.T(t, qi, ui, p)[0, 0])
+        moving = np.array([(T(t, qi, ui) - T(t, qi, -ui)) / 2 + 2 * T(t, qi, 0 * ui) for t, qi, ui in zip(grid, q, u)])
+        work += moving - moving[0]
     return work
 
 

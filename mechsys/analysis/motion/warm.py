@@ -143,6 +143,9 @@ def remember(path: Path, overrides: Sequence[str], model: MechanicalModel, resul
     from mechsys.numeric.parameters import parameter_values
     from mechsys.analysis.motion.simulate import RightHandSide, compile_model, stiffness
 
+    if compile_model(model).explicit_time:
+        return  # the work of what moves with time needs dL/dt: the full path has it
+
     charts = [[seq, list(idx)] for _link, _kind, seq, idx in watched(model)]
     if charts and not regular_run(charts, result.t[:1], result.q[:1], result.u[:1]):
         return  # it starts at (or near) a gimbal lock of the file's angles: every run needs the full path
