@@ -80,7 +80,7 @@ def watched(model: MechanicalModel) -> list[tuple]:
 
         charts = rotation_charts(model)
         links = {c[0] for c in charts}
-        ok = bool(charts) and not model.kin.constraints and not model.kin.contacts and not model.events and all(
+        ok = bool(charts) and all(c.kind == "nonholonomic" for c in model.kin.constraints) and not model.kin.contacts and not model.events and all(
             j.link in links and len(names) == 3 for j, names, _sequence in rotation_joints(model))
         memo = model.__dict__["_charted_watch"] = charts if ok else []
     return memo
@@ -256,6 +256,8 @@ class _Charted:
                 budget = min(budget, max(d, self.opts.sample_turn) / rate)
                 h_max = min(h_max, self.opts.sample_turn / rate)
         budget *= shrink
+        if not math.isfinite(budget) and shrink < 1:  # at rest, so no turn rate to size it: a shorter window
+            budget = shrink * (self.grid[-1] - t)
         grid = self.grid
         step = grid[j + 1] - grid[j]
         if at_output and step <= min(h_max, budget):
@@ -322,7 +324,7 @@ def simulate_charted(model: MechanicalModel, run_options: SimulationOptions, ove
     otherwise it continues from the last good output row in look-ahead windows, each an ``integrate`` run from
     t = 0 of the model re-derived in the joint's best-conditioned sequence, with its times shifted."""
     from mechsys.analysis.motion.simulate import (CVODE_TIGHTENING, EVALUATIONS_PER_STEP, METHODS, SimulationResult,
-                                                  file_state, integrate, output_grid)
+                                                  SlowPace, file_state, integrate, output_grid)
 
     t_end, dt, max_steps = run_options.t_end, run_options.dt, run_options.max_steps
     joints = watched(model) if run_options.method in METHODS and t_end > 0 else []
@@ -403,7 +405,7 @@ def simulate_charted(model: MechanicalModel, run_options: SimulationOptions, ove
         try:
             res = run(state.chart_model(charts).with_overrides(values), w.length, w.h, t)
         except AnalysisError as exc:
-            if BUDGET_SPENT in str(exc) or shrink < 1e-3:
+            if (BUDGET_SPENT in str(exc) and not isinstance(exc, SlowPace)) or shrink < 1e-3:
                 raise AnalysisError(f"{exc} (times counted from t = {t:.6g} s, in the {'/'.join(charts)} "
                                     f"angles)") from None
             shrink /= 4
@@ -433,11 +435,13 @@ def simulate_charted(model: MechanicalModel, run_options: SimulationOptions, ove
         notes.append(_note_switches(joints, state.switches, options))
     notes += _note_undefined(state.undefined, options)
     timings["re-charting"] = max(0.0, time.perf_counter() - started - totals["seconds"])
-    out = SimulationResult(list(model.coordinates), grid, state.Q, state.U, state.T, state.V, np.zeros(len(grid)),
-                           chosen.method, totals["rhs"], totals["steps"], timings, warnings + notes)
-    from mechsys.analysis.motion.simulate import compile_model, nonconservative_work
+    from mechsys.analysis.motion.simulate import compile_model, constraint_residual, nonconservative_work
 
-    with np.errstate(all="ignore"):  # the work rate in the file's angles, finite off the lock itself
-        work = nonconservative_work(compile_model(model), p, grid, state.Q, state.U)
+    c = compile_model(model)
+    with np.errstate(all="ignore"):  # the work rate and the rows in the file's angles, finite off the lock itself
+        residual = constraint_residual(c, p, grid, state.Q, state.U)
+        work = nonconservative_work(c, p, grid, state.Q, state.U)
+    out = SimulationResult(list(model.coordinates), grid, state.Q, state.U, state.T, state.V, residual,
+                           chosen.method, totals["rhs"], totals["steps"], timings, warnings + notes)
     out.work = work if work is None or np.all(np.isfinite(work)) else None
     return out

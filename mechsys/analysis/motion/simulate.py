@@ -24,6 +24,11 @@ METHODS = ("auto", "native", "CVODE", "RK45", "DOP853", "Radau", "BDF", "LSODA")
 EVALUATIONS_PER_STEP = 20  # the scipy and CVODE paths count the step budget in right-hand-side evaluations
 RESIDUAL_TOLERANCE = 1e-6  # a projected state must satisfy the constraints to 1e-6 x (1 + max |q|, |q'|)
 PROJECTION_STEPS = 20  # steps (of the size reached) between two projections onto the constraints
+class SlowPace(AnalysisError):
+    """A scipy or CVODE run stopped because at its pace the budget would not reach the end (not spent yet): a
+    re-charted window that crawls into a gimbal lock is tried again shorter."""
+
+
 BUDGET_WINDOW = 10_000  # RHS evaluations between two checks of the pace of a scipy or CVODE run against its budget
 SLOW_WINDOWS = 3  # consecutive windows whose pace would overspend the budget before a run is stopped (a transient
 # that starts slowly, like the initial layer of a stiff scene at a tight tolerance, speeds up within one or two)
@@ -384,7 +389,7 @@ class RightHandSide:
         if self.slow_windows >= SLOW_WINDOWS:
             pace = f"advanced {progress:.3g} s; at that pace the remaining {remaining:.3g} s would need about " \
                 f"{needed:.3g} evaluations" if progress > 0 else "did not advance the time at all"
-            raise AnalysisError(f"integration stopped at t = {self.front:.6g}: {self._why_slow()} (the last "
+            raise SlowPace(f"integration stopped at t = {self.front:.6g}: {self._why_slow()} (the last "
                                 f"{BUDGET_WINDOW} right-hand-side evaluations {pace}, with "
                                 f"{self.max_calls - self.calls:.3g} left of the budget of {self.max_calls:.3g}; "
                                 "raise --max-steps if the run is only slow to start)")
