@@ -270,3 +270,38 @@ def test_plot_draws_readable_panels_for_outputs_and_reactions(tmp_path, monkeypa
     assert titles[:2] == ["coordinates", "rates"] and "pin" in titles and "driving forces" in titles
     assert "reaction(crank) (force)" in titles and len(titles) == 4 + report.MAX_EXTRA_PANELS
     assert "more groups of columns are in the file" in drawn["fig"]._suptitle.get_text()
+
+
+BEAD_ON_A_SLOPED_WIRE = """name: bead on a wire
+parameters: {m: 0.5, g: 9.81, alpha: 0.4}
+coordinates:
+  x: {initial: 0}
+  y: {initial: 0}
+  z: {initial: 0}
+links:
+  bead:
+    joint: {type: transform, parent: ground, steps: [{translate: [x, y, z]}]}
+    mass: m
+    particle: true
+constraints:
+  - {type: point_on_line, name: wire, point: bead, through: ground, direction: [cos(alpha), 0, sin(alpha)]}
+  - {type: point_on_plane, name: floor, point: bead, through: ground, normal: y}
+forces:
+  - {type: gravity, acceleration: [0, 0, -g]}
+outputs:
+  l1: multiplier(wire.1)
+  l2: multiplier(wire.2)
+  lf: multiplier(floor.1)
+"""
+
+
+def test_the_numbered_rows_of_point_on_line_and_plane_can_be_named(tmp_path):
+    """multiplier(wire.1) was a parse error ('.1' read as a number) although the error message suggested that
+    very name. A bead sliding down a wire at alpha to the horizontal: the wire's normal force has magnitude
+    m g cos(alpha) (here the wire's two rows and the redundant floor row share it; their least-squares
+    multipliers' combined force is the physical one)."""
+    data = simulate(tmp_path, BEAD_ON_A_SLOPED_WIRE, "--t-end", "1", "--dt", "0.5")
+    m, g, alpha = 0.5, 9.81, 0.4
+    assert np.all(np.isfinite(data["l1"])) and np.all(np.isfinite(data["l2"])) and np.all(np.isfinite(data["lf"]))
+    total = np.hypot(np.hypot(data["l1"], data["l2"]), data["lf"])
+    assert total == pytest.approx(np.full(3, m * g * math.cos(alpha)), rel=1e-9)

@@ -13,7 +13,7 @@ the joint point), ``link.com``, ``link.NAME``, ``ground.NAME``. ``system`` means
 | momentum_of(q) | the generalized momentum dT/d(der(q)) |
 | reaction(L[, K]) | (Fx, Fy, Fz, Mx, My, Mz): the wrench L's joint transmits to L's subtree (analysis/motion/reactions.py); in the axes of link K if given |
 | constraint_force(C[, K]) | the force a point_on_point or rolling constraint C applies at its (first) point; in the axes of link K if given |
-| multiplier(ROW) | the Lagrange multiplier of one constraint row (M q'' = f + A^T lambda), e.g. crank_pin.x |
+| multiplier(ROW) | the Lagrange multiplier of one constraint row (M q'' = f + A^T lambda), e.g. crank_pin.x or floor.1 |
 
 Accelerations (acceleration(P), der(der(q))) contain the acceleration symbols of the coordinates; the
 evaluation along a motion (analysis/motion/outputs.py) supplies them from the equations of motion. Multipliers and

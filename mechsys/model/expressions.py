@@ -340,7 +340,13 @@ class _Parser:
             if first.kind != "name":
                 raise ExpressionError(f"{tok.text}() takes names of links, points or coordinates", first.pos)
             text = first.text
-            while self.peek().text == ".":
+            while True:
+                nxt = self.peek()
+                if nxt.kind == "num" and re.fullmatch(r"\.\d+", nxt.text) and nxt.pos == first.pos + len(text):
+                    text += self.take().text  # a numbered row: floor.1 (read as the number .1)
+                    continue
+                if nxt.text != ".":
+                    break
                 self.take()
                 part = self.take()
                 if part.kind != "name":
