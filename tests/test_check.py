@@ -239,3 +239,58 @@ def test_equilibrium_matching_and_verdict():
     assert evaluate(near, outputs, "unused.yaml")[0] == "fail"
     near["tolerance"] = 1e-5
     assert evaluate(near, outputs, "unused.yaml")[0] == "pass"
+
+
+SPRING_WITH_CLOSED_FORMS = """\
+name: mass on a spring, its closed form in the expectations
+parameters: {m: 2, k: 18, x0: 0.1}
+coordinates:
+  x: {initial: x0, rate: 0}
+links:
+  block: {joint: {type: prismatic, parent: ground, axis: x, coordinate: x}, mass: m}
+forces:
+  - {type: torsional_spring, coordinate: x, stiffness: k, free_angle: 0}
+expect:
+  - name: x(1) = x0 cos(sqrt(k/m))
+    analysis: simulate
+    options: {t_end: 1, dt: 0.01}
+    output: final.x
+    value: x0*cos(sqrt(k/m)*1)
+    tolerance: 1.0e-8
+  - name: with k = 8 set, x(1) = x0 cos(2)
+    analysis: simulate
+    set: {k: 8}
+    options: {t_end: 1, dt: 0.01}
+    output: final.x
+    value: x0*cos(sqrt(k/m))
+    tolerance: 1.0e-8
+  - name: a wrong closed form fails
+    analysis: simulate
+    options: {t_end: 1, dt: 0.01}
+    output: final.x
+    value: x0*sin(sqrt(k/m))
+    tolerance: 1.0e-8
+  - name: an unknown name is an error
+    analysis: simulate
+    options: {t_end: 1, dt: 0.01}
+    output: final.x
+    value: x0*cos(omega)
+    tolerance: 1.0e-8
+"""
+
+
+def test_a_value_written_as_a_closed_form_in_the_parameters_is_evaluated(tmp_path):
+    """`value: 5/14*g*sin(alpha)` was compared as text with the measured number (a FAIL without a message, under an
+    'expected' column showing its tolerance); it is now an expression of the parameters, with `set` applied."""
+    path = tmp_path / "spring.yaml"
+    path.write_text(SPRING_WITH_CLOSED_FORMS, encoding="utf-8")
+    r = mechsys_check(path, "-f", "json")
+    assert r.returncode == 1, r.stdout + r.stderr
+    results = {x["name"]: x for x in json.loads(r.stdout)["results"]}
+    assert [results[name]["status"] for name in ("x(1) = x0 cos(sqrt(k/m))", "with k = 8 set, x(1) = x0 cos(2)",
+                                                   "a wrong closed form fails", "an unknown name is an error")] == [
+        "pass", "pass", "fail", "error"]
+    assert float(results["x(1) = x0 cos(sqrt(k/m))"]["measured"]) == pytest.approx(0.1 * math.cos(3), abs=1e-8)
+    assert "= -0.09899924966" in results["x(1) = x0 cos(sqrt(k/m))"]["message"]
+    assert float(results["with k = 8 set, x(1) = x0 cos(2)"]["measured"]) == pytest.approx(0.1 * math.cos(2), abs=1e-8)
+    assert "unknown name 'omega'" in results["an unknown name is an error"]["message"]

@@ -147,7 +147,14 @@ def evaluate(e: dict, outputs: dict, file: str) -> tuple[str, str, str]:
     measured = outputs[key]
     if e.get("expression") is not None:
         return _evaluate_expression(e, measured, file)
-    if isinstance(measured, (str, bool)) or isinstance(e.get("value"), (str, bool)):
+    note = ""
+    if isinstance(e.get("value"), str) and not isinstance(measured, (str, bool)):
+        try:  # a closed form in the parameters: value: 5/14*g*sin(alpha)
+            target = _value_of(e, file)
+        except InputError as exc:
+            return "error", f"{float(measured):.10g}", f"value {e['value']!r}: {exc.message}"
+        e, note = {**e, "value": target}, f"value {e['value']} = {target:.10g}"
+    elif isinstance(measured, (str, bool)) or isinstance(e.get("value"), (str, bool)):
         ok = str(measured) == str(e.get("value"))
         return ("pass" if ok else "fail"), str(measured), ""
     value = float(measured)
@@ -158,7 +165,19 @@ def evaluate(e: dict, outputs: dict, file: str) -> tuple[str, str, str]:
         ok = ok and value >= float(e["min"])
     if e.get("max") is not None:
         ok = ok and value <= float(e["max"])
-    return ("pass" if ok else "fail"), f"{value:.10g}", ""
+    return ("pass" if ok else "fail"), f"{value:.10g}", note
+
+
+def _value_of(e: dict, file: str) -> float:
+    """An expectation's value written as an expression of the parameters (the whitelist parser), at the file's
+    values with the expectation's `set` applied."""
+    from mechsys.model.load import read_document
+
+    doc = read_document(file, {k: str(v) for k, v in e["set"].items()})
+    expr = doc.parse(e["value"], ("expect",), "parameter").xreplace(doc.numeric_parameters())
+    if not expr.is_number or not expr.is_real:
+        raise InputError(f"not a real number with the parameter values ({expr})", file, 1, 1)
+    return float(expr)
 
 
 def _evaluate_equilibrium(e: dict, outputs: dict) -> tuple[str, str, str]:
