@@ -416,3 +416,19 @@ def test_modes_of_a_steady_motion_without_shape_coordinates():
     assert text.exit_code == 0 and "no shape coordinates" in text.output
     frf = runner.invoke(app, ["modes", str(path), "--set", "tauL=0", "--set", "tauR=0", "--frf", "0:1:3"])
     assert frf.exit_code == 2 and "--frf" in frf.output and "Traceback" not in frf.output
+
+
+def test_redundant_rolling_rows_are_named_with_their_rank_and_the_way_out(tmp_path):
+    """The two-wheel robot with both wheels' sideways rows (the same row): `equilibria` said only 'redundant or
+    singular constraint rows'; now their rank and `components:`; `info`'s note said the rank 'gives 3' (the DOF)."""
+    text = (DATA_DIR / "beyond" / "diffdrive.yaml").read_text(encoding="utf-8")
+    both = text.replace("frame: body, components: [x]}", "frame: body, components: [x, y]}")
+    assert both != text
+    path = tmp_path / "robot.yaml"
+    path.write_text(both, encoding="utf-8")
+    r = runner.invoke(app, ["equilibria", str(path), "--set", "tauL=0", "--set", "tauR=0"])
+    assert r.exit_code == 1
+    flat = " ".join(r.output.split())
+    assert "their rank is 3 of 4 rows" in flat and "`components:`" in flat
+    info = runner.invoke(app, ["info", str(path)])
+    assert "the constraint Jacobian's rank 3 gives 5 - 3 = 2" in " ".join(info.output.split())

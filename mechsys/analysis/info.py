@@ -142,8 +142,9 @@ def system_info(model: MechanicalModel) -> Info:
     dof_formula = mobility - len(prescribed)
     redundant = max(0, len(kin.constraints) - rank)
     if dof != dof_formula:
-        notes.append(f"the mobility formula gives {dof_formula} but the constraint Jacobian's rank gives {dof}: "
-                     "the formula counts dependent constraint equations (e.g. spatial counting of a planar loop)")
+        notes.append(f"the mobility formula gives {dof_formula} DOF but the constraint Jacobian's rank {rank} "
+                     f"gives {nfree} - {rank} = {dof}: the formula counts dependent constraint equations (e.g. "
+                     f"spatial counting of a planar loop, or rolling rows of which some are dependent)")
     return Info(
         name=model.name, moving_links=n, joints=joints, constraints=constraint_rows, mobility=mobility,
         prescribed=prescribed, dof_formula=dof_formula, free_coordinates=list(model.coordinates),

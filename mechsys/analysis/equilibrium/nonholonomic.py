@@ -271,8 +271,12 @@ def choose_split(model: MechanicalModel, pieces: ConstrainedPieces, q0: np.ndarr
     dep = _greedy(A, order, m)
     if len(dep) < m:
         why = (f" with {', '.join(forced)} independent" if forced else "")
+        rank = int(np.linalg.matrix_rank(A)) if A.size else 0
+        hint = (f"; their rank is {rank} of {m} rows: keep independent ones only (a rolling constraint's "
+                f"`components:` lists the ground axes it holds, e.g. [x, y] on a level floor; two wheels on one axle "
+                f"share their sideways row)" if rank < m else "")
         raise AnalysisError(f"the velocity constraints cannot be solved for {m} dependent speeds at the initial "
-                            f"state{why} (redundant or singular constraint rows there)")
+                            f"state{why} (redundant or singular constraint rows there){hint}")
     elim: list[int] = []
     if mh:
         Phi_q = v["Eq"][n + 2 * m:, :]
