@@ -466,6 +466,8 @@ class Builder:
         surface = self.frame(c.on, cp + ("on",))
         v_surf = surface.home_R * surface.v + surface.omega_ground.cross(contact - surface.origin)
         slip = v_link - v_surf
+        if c.axes != "ground":  # the components along the axes of a link (an incline's tangents)
+            slip = self.frame(c.axes, cp + ("axes",)).R.T * slip
         return [ConstraintRow(f"{name}.{ax}", "nonholonomic", None, slip["xyz".index(ax)]) for ax in c.components]
 
     # ------------------------------------------------------------------------------------- contacts

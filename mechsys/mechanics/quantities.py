@@ -115,7 +115,9 @@ class ModelQuantities(Quantities):
         for k, row in enumerate(rows):
             if row.startswith(ref + ".") and row[len(ref) + 1:] in ("x", "y", "z"):
                 force["xyz".index(row[-1])] = self.placeholder("multiplier", row, k)
-        return force
+        axes = next((getattr(c, "axes", "ground") for i, c in enumerate(self.model.doc.spec.constraints)
+                     if (c.name or f"{c.type}_{i + 1}") == ref), "ground")
+        return force if axes == "ground" else self.frame_of(axes, at).R * force  # rows along a link's axes
 
     def in_axes(self, value: sp.MatrixBase, link: str, at: int) -> sp.MatrixBase:
         """A ground-axes force (or wrench: force and moment) in the axes of ``link``."""

@@ -232,7 +232,10 @@ class Rolling(Strict):
                                                 "for a disk a frame that leans but does not spin, for a ball ground")
     on: str = Field("ground", description="the link rolled on")
     components: list[Literal["x", "y", "z"]] = Field(default_factory=lambda: ["x", "y", "z"],
-                                                      description="velocity components (in ground axes)")
+                                                      description="velocity components (in 'axes')")
+    axes: str = Field("ground", description="axes of 'components' (a link or ground): on an incline, the incline, "
+                                            "so that [x, y] are its tangent directions and the rows' force is the "
+                                            "friction")
 
 
 Constraint = Annotated[

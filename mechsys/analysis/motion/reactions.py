@@ -148,11 +148,11 @@ def _constraints(items: _Items, lam: list[sp.Symbol]) -> None:
             body = items.builder.frame(c.link, path + ("link",))
             axes = items.builder.frame(c.frame or c.link, path + ("frame",))
             contact = body.origin + axes.R * model.doc.parse_vec(c.contact, path + ("contact",))
+            along = items.builder.frame(c.axes, path + ("axes",)).R  # the rows' axes (ground by default)
             for ax in c.components:
                 row = take(f"{name}.{ax}")
                 if row is not None:
-                    F = sp.zeros(3, 1)
-                    F["xyz".index(ax)] = lam[row]
+                    F = lam[row] * along[:, "xyz".index(ax)]
                     items.add(c.link, contact, F)
                     items.add(c.on, contact, -F)
 
