@@ -307,33 +307,7 @@ def test_the_numbered_rows_of_point_on_line_and_plane_can_be_named(tmp_path):
     assert total == pytest.approx(np.full(3, m * g * math.cos(alpha)), rel=1e-9)
 
 
-BALL_ON_AN_INCLINE = """name: ball on an incline, its rolling rows along the incline's axes
-parameters: {m: 2.0, r: 0.1, g: 9.81, alpha: 0.3}
-coordinates:
-  x: {initial: 0, rate: 0}
-  y: {initial: 0, rate: 0}
-  a1: {initial: 0, rate: 0}
-  a2: {initial: 0, rate: 0}
-  a3: {initial: 0, rate: 0}
-links:
-  incline:
-    joint: {type: transform, parent: ground, steps: [{rotate: {axis: y, angle: alpha}}]}
-  slide_x:
-    joint: {type: prismatic, parent: incline, axis: x, coordinate: x}
-  slide_y:
-    joint: {type: prismatic, parent: slide_x, axis: y, coordinate: y, origin: [0, 0, r]}
-  ball:
-    joint: {type: spherical, parent: slide_y, sequence: zyx, coordinates: [a1, a2, a3]}
-    mass: m
-    shape: {sphere: {radius: r}}
-constraints:
-  - {type: rolling, name: no_slip, link: ball, contact: [0, 0, -r], frame: incline, components: [x, y], axes: incline}
-forces:
-  - {type: gravity, acceleration: [0, 0, -g]}
-outputs:
-  F: constraint_force(no_slip, incline)
-  N: reaction(slide_x, incline)
-"""
+BALL_ON_AN_INCLINE = ROOT / "tests" / "data" / "beyond" / "ball_on_incline.yaml"
 
 
 def test_rolling_rows_along_the_inclines_axes_give_the_friction_and_the_normal_force(tmp_path):
@@ -341,7 +315,7 @@ def test_rolling_rows_along_the_inclines_axes_give_the_friction_and_the_normal_f
     m g cos(alpha). With components [x, y] in ground axes the rows' force pointed along ground x, and the slide's
     reaction took the rest (normal 19.26 instead of 18.74): right in sum, not the physical split. `axes: incline`
     puts the rows along the incline's tangents."""
-    data = simulate(tmp_path, BALL_ON_AN_INCLINE, "--t-end", "0.3", "--dt", "0.1")
+    data = simulate(tmp_path, BALL_ON_AN_INCLINE.read_text(encoding="utf-8"), "--t-end", "0.3", "--dt", "0.1")
     m, g, alpha = 2.0, 9.81, 0.3
     assert data["x"][-1] == pytest.approx(5 / 14 * g * math.sin(alpha) * 0.3**2, rel=1e-9)
     assert data["F.x"] == pytest.approx(np.full(4, -2 / 7 * m * g * math.sin(alpha)), rel=1e-9)
