@@ -20,6 +20,12 @@ def add_outputs(model: MechanicalModel, result: SimulationResult) -> SimulationR
         t0 = time.perf_counter()
         result.outputs = output_columns(model, result, parameter_values(model))
         result.timings["outputs"] = time.perf_counter() - t0
+        undefined = ~np.all(np.isfinite(result.u), axis=1)
+        lost = [name for name, column in result.outputs.items() if np.any(np.isnan(column[undefined]))]
+        if lost:
+            times = ", ".join(f"{t:.6g}" for t in result.t[undefined][:8])
+            result.warnings.append(f"outputs undefined: {', '.join(lost)} are NaN at t = {times} s with the angle "
+                                   f"rates there (the rows where the file's angles are at gimbal lock)")
     return result
 
 
@@ -85,5 +91,8 @@ def accelerations_along(model: MechanicalModel, result: SimulationResult,
     captured = [(im["t"], c.gap_names.index(im["contact"])) for im in result.impacts
                 if im.get("captured") and im["contact"] in c.gap_names]
     for t, q, u in zip(result.t, result.q, result.u):
+        if not np.all(np.isfinite(u)):  # a re-charted row at the file's gimbal lock: rates undefined there
+            yield np.full(len(q), np.nan), np.full(c.m, np.nan)
+            continue
         rhs.persistent = sorted({k for tc, k in captured if tc <= t})
         yield rhs.accelerations(float(t), q, u)
