@@ -63,6 +63,15 @@ def _modes(model: MechanicalModel, options: dict) -> Outputs:
     for k, (w, z) in enumerate(zip(m.frequencies, m.damping_ratios), start=1):
         out[f"mode{k}.frequency"] = float(w)
         out[f"mode{k}.damping_ratio"] = float(z)
+    # the damped eigenvalues: with gyroscopic or circulatory terms the motion's own frequencies, which the modes'
+    # (of M and the symmetric K) are not; a Campbell diagram reads these
+    out["coupling"] = m.coupling.split(" terms")[0] if m.coupling else "none"
+    top = max(1.0, float(np.max(np.abs(m.eigenvalues)))) if len(m.eigenvalues) else 1.0
+    oscillating = sorted((v for v in m.eigenvalues if v.imag > 1e-9 * top), key=lambda v: v.imag)
+    for k, v in enumerate(oscillating, start=1):
+        out[f"damped{k}.frequency"] = float(v.imag)
+        out[f"damped{k}.decay_rate"] = float(-v.real)
+    out["unstable_modes"] = m.unstable_modes
     return out
 
 

@@ -82,12 +82,19 @@ class ReducedSystem:
     K: np.ndarray
     T: np.ndarray
     names: list[str]
+    #: before static condensation (constraints removed): M, C, K, the map back, and the static flexibility of the
+    #: condensed coordinates on the full ones (a force on a massless coordinate deflects it at once)
+    whole: tuple = ()
+    flexibility: np.ndarray | None = None
 
     def receptance(self, omega: float, lin: Linearization) -> np.ndarray:
-        """H(omega) = T (K - omega^2 M + i omega C)^-1 T^T on the full coordinates: the reduced (constrained,
-        condensed) system, mapped back."""
-        Z = self.K - omega**2 * self.M + 1j * omega * self.C
-        return self.T @ np.linalg.solve(Z, self.T.T)
+        """H(omega) = B (K - omega^2 M + i omega C)^-1 B^T on the full coordinates, with the constraints removed
+        (B their null space) but nothing condensed: exact for massless coordinates, their dampers included (the
+        condensed system dropped a massless coordinate's own static flexibility, and a damper on it: a mass held
+        by a spring and a spring-damper in series was 19 % off at 20 rad/s)."""
+        M, C, K, B = self.whole or (self.M, self.C, self.K, self.T)
+        Z = K - omega**2 * M + 1j * omega * C
+        return B @ np.linalg.solve(Z, B.T)
 
     def state_space(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         n = self.M.shape[0]
@@ -95,7 +102,8 @@ class ReducedSystem:
         A = np.block([[np.zeros((n, n)), np.eye(n)], [-Minv @ self.K, -Minv @ self.C]])
         B = np.vstack([np.zeros((n, self.T.shape[0])), Minv @ self.T.T])
         Cout = np.hstack([self.T, np.zeros((self.T.shape[0], n))])
-        return A, B, Cout, np.zeros((self.T.shape[0], self.T.shape[0]))
+        D = self.flexibility if self.flexibility is not None else np.zeros((self.T.shape[0], self.T.shape[0]))
+        return A, B, Cout, D
 
 
 _STABLE = ("asymptotically stable", "stable")
@@ -224,6 +232,7 @@ def reduce(model: MechanicalModel, lin: Linearization) -> tuple[ReducedSystem, l
     scale = max(1e-300, float(np.max(np.abs(M)))) if M.size else 1.0
     massless = [i for i in range(M.shape[0]) if np.max(np.abs(M[i, :])) <= 1e-12 * scale]
     condensed = [names[i] for i in massless]
+    whole, flexibility = (M, C, K, base), None
     if massless:
         keep = [i for i in range(M.shape[0]) if i not in massless]
         Kss = K[np.ix_(massless, massless)]
@@ -241,10 +250,12 @@ def reduce(model: MechanicalModel, lin: Linearization) -> tuple[ReducedSystem, l
         Tc = np.zeros((M.shape[0], len(keep)))
         Tc[keep, range(len(keep))] = 1.0
         Tc[massless, :] = G
+        Bs = base[:, massless]  # a force's part on the condensed coordinates deflects them statically
+        flexibility = Bs @ np.linalg.solve(Kss, Bs.T)
         M, C, K = Tc.T @ M @ Tc, Tc.T @ C @ Tc, Tc.T @ K @ Tc
         base = base @ Tc
         names = [names[i] for i in keep]
-    return ReducedSystem(M, C, K, base, names), condensed
+    return ReducedSystem(M, C, K, base, names, whole, flexibility), condensed
 
 
 def vibration_modes(model: MechanicalModel, at: dict[str, float] | None = None,
@@ -289,7 +300,35 @@ def vibration_modes(model: MechanicalModel, at: dict[str, float] | None = None,
             if abs(zeta[k]) < 1e-12:
                 zeta[k] = 0.0
     names = list(lin.coordinates)
+    top = max(1.0, float(np.max(np.abs(vals)))) if vals.size else 1.0
+    growing = [v for v in vals if v.real > 1e-9 * top and v.imag >= 0]
+    if growing and not unstable:  # no negative stiffness, yet the motion grows: flutter or a gyroscopic instability
+        unstable = len(growing)
+        note = "; ".join(x for x in (note, f"{len(growing)} eigenvalue(s) with a positive real part (up to "
+                                     f"{max(v.real for v in growing):.6g} 1/s): the motion grows although no "
+                                     f"stiffness is negative, and the damping ratios above (modal, §5) do not show "
+                                     f"it") if x)
+    damped = _damped_condensed(red, lin, condensed)
+    if damped:
+        note = "; ".join(x for x in (note, damped) if x)
     return Modes(names, e, freqs, shapes, rigid, zeta, vals, condensed, unstable, red, note, _coupling(red, vals))
+
+
+def _damped_condensed(red: ReducedSystem, lin: Linearization, condensed: list[str]) -> str:
+    """A note when dampers act on statically condensed (massless) coordinates: the modes, the state space and the
+    transfer function then hold the condensed system, an approximation (a spring and a damper in series behind a
+    massless node: third order, two poles shown); --frf is exact."""
+    if not condensed or not red.whole:
+        return ""
+    M, C, _K, _B = red.whole
+    scale = max(1e-300, float(np.max(np.abs(M))))
+    rows = [i for i in range(M.shape[0]) if np.max(np.abs(M[i, :])) <= 1e-12 * scale]
+    cscale = float(np.max(np.abs(C))) if C.size else 0.0
+    if not rows or cscale == 0.0 or float(np.max(np.abs(C[rows, :]))) <= 1e-12 * cscale:
+        return ""
+    return (f"damping acts on the condensed (massless) coordinate(s) {', '.join(condensed)}: the frequencies, damping "
+            f"ratios, eigenvalues, state space and transfer function are those of the statically condensed system, "
+            f"an approximation that drops the damper's own pole(s); --frf is exact (modes.md §3)")
 
 
 def _rigid(w2: np.ndarray, phi: np.ndarray, K: np.ndarray, M: np.ndarray) -> list[bool]:
