@@ -368,7 +368,9 @@ def test_the_physical_state_velocities_are_the_time_derivative_of_the_positions(
             assert np.allclose(state[k + 3:k + 6], r_dot, rtol=1e-6, atol=1e-6 * (1 + np.max(np.abs(r_dot))))
             k += 6 if particle else 6 + 9 + 3
             checked += 1
-        assert k == len(state)
+        assert k == len(state) - 1  # then the potential energy
+        assert state[-1] == pytest.approx(float(model.potential_energy.subs(
+            {**dict(zip(model.q, q)), **dict(zip(model.parameter_symbols, p)), model.t: t})), rel=1e-9, abs=1e-12)
     assert checked >= 3
 
 

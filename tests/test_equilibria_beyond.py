@@ -520,3 +520,53 @@ def test_a_precession_branch_born_at_a_gimbal_lock_is_swept():
     for r in tilted:
         w = float(r["der(psi)"])
         assert abs(float(r["theta"])) == pytest.approx(math.acos((C * 40 * w - mgl) / ((A - C) * w * w)), abs=1e-8)
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# distinct rests with the same mass positions; angles a swept parameter makes non-periodic
+
+
+def test_rests_with_the_same_masses_but_other_spring_energies_are_distinct():
+    """Snap-through linkage at P = 0 (tests/data/beyond/snap_through.yaml): the only potential is the spring's,
+    k/2 (s - 1)^2, on the manifold where s = +-d(th1), d = sqrt(3.56 - 3.2 cos th1) the apex's distance from B.
+    Stationary: s = 1 (cos th1 = 0.8, stable), or d'(th1) = 0 (th1 = 0, pi) with s = +-d: at th1 = 0, s = -0.6
+    is a minimum of (d + 1)^2 (stable), s = +0.6 a maximum of (d - 1)^2; at th1 = pi both are unstable. The rests
+    at th1 = 0 put the masses in the same places (the rod's particle at the apex, the sleeve massless) and were
+    one: the stable s = -0.6 was dropped and the unstable +0.6 reported at th1 = 0."""
+    data = equilibria(BEYOND / "snap_through.yaml", "--set", "P=0")
+    got = sorted((round(e["coordinates"]["th1"], 6), round(e["coordinates"]["s"], 6), e["stability"] != "unstable")
+                 for e in data["equilibria"])
+    th = round(math.acos(0.8), 6)
+    want = sorted([(-th, 1.0, True), (th, 1.0, True), (0.0, -0.6, True), (0.0, 0.6, False),
+                   (round(math.pi, 6), -2.6, False), (round(math.pi, 6), 2.6, False)])
+    assert got == want
+
+
+def test_a_sweep_decides_the_angles_periodicity_over_the_swept_values():
+    """The file's k = 0 makes th periodic; swept over k > 0 it is not (k th + sin th = tau). The sweep's rows were
+    wrapped 2 pi off (68 of 89: residual up to 1.94), its fold at k = 0.32997 was reported at th = -1.907 and
+    five folds beyond th = +-pi were missed (found only when another run's searches were in the cache). Every row
+    now solves k th + sin th = tau, and the folds are those of k + cos th = 0 with it (scipy here)."""
+    from scipy.optimize import brentq
+
+    out = cli("equilibria", str(BEYOND / "torque_spring.yaml"), "--set", "tau=0.5", "--sweep", "k=0.05:0.5:10",
+              "-f", "csv")
+    rows = [r for r in csv.reader(io.StringIO(out)) if r]
+    header = next(r for r in rows if r[0] == "branch")
+    table = [dict(zip(header, r)) for r in rows if r[0].isdigit() and len(r) == len(header)]
+    assert len(table) > 100
+    for row in table:
+        k, th = float(row["k"]), float(row["th"])
+        assert abs(k * th + math.sin(th) - 0.5) < 1e-6
+    # the folds: k = -cos th and k th + sin th = 0.5, i.e. g(th) = -th cos th + sin th - 0.5 = 0 with k in range
+    def g(x: float) -> float:
+        return -x * math.cos(x) + math.sin(x) - 0.5
+
+    grid = np.linspace(-40, 40, 80001)
+    roots = [brentq(g, a, b) for a, b in zip(grid[:-1], grid[1:]) if g(a) * g(b) < 0]
+    want = sorted((-math.cos(x), x) for x in roots if 0.05 <= -math.cos(x) <= 0.5)
+    data = equilibria(BEYOND / "torque_spring.yaml", "--set", "tau=0.5", "--sweep", "k=0.05:0.5:10")
+    folds = sorted((b["value"], b["coordinates"]["th"]) for b in data["bifurcations"] if b["kind"] == "fold")
+    assert len(want) == 6 and len(folds) == len(want)
+    for (k, th), (k_want, th_want) in zip(folds, want):
+        assert k == pytest.approx(k_want, abs=1e-6) and th == pytest.approx(th_want, abs=1e-6)

@@ -253,6 +253,8 @@ def sweep(model: MechanicalModel, name: str, start: float, stop: float, points: 
     undefined = []
     singular: dict[str, list[np.ndarray]] = {}
     samples = np.linspace(lo, hi, 5)  # branches born inside the range need a start of their own
+    if hasattr(problem, "periodic_over"):
+        problem.periodic_over([par.at(v) for v in samples])
 
     def multistart(k: int) -> list[np.ndarray] | str:
         problem.undefined = False

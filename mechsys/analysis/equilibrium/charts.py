@@ -150,8 +150,10 @@ def reclassify(problem: EquilibriumProblem, e: Equilibrium, where: Singularity, 
 
 def _state_fn(model):
     """Compiled physical state of every massive link at (q, u): centre-of-mass position and velocity in ground
-    axes, and for rigid bodies the orientation and the angular velocity (ground axes). Two roots with the same
-    physical state are one steady motion, whatever coordinates describe it."""
+    axes, and for rigid bodies the orientation and the angular velocity (ground axes); last, the potential energy,
+    which sees what the masses do not (a spring on a massless sleeve's slider: two snap-through rests with the same
+    mass positions and spring energies 8 and 128 were one). Two roots with the same physical state are one steady
+    motion, whatever coordinates describe it."""
     memo = model.__dict__.setdefault("_chart_memo", {})
     if "state" not in memo:
         # the generated code is cached on disk like the simulation's (a bicycle's: a second of CSE per command)
@@ -168,6 +170,7 @@ def _state_fn(model):
                 parts += list(r) + list(frame.home_R * v)
                 if not body.particle:
                     parts += list(frame.R) + list(frame.R * w)
+            parts.append(model.potential_energy)
             args = list(model.q) + list(model.u) + list(model.parameter_symbols) + [model.t]
             source = generate_source([sp.sympify(x) for x in parts], args)
             cache.store(key, {"source": source})
@@ -198,7 +201,9 @@ def _reference(problem: EquilibriumProblem, a: Equilibrium, p: np.ndarray, memo:
                ) -> tuple[np.ndarray, float]:
     """The physical state of ``a`` and the tolerance the other motion's state is compared with."""
     ref = _state(problem, a, p, {}, memo)
-    return ref, (1e-7 * (1.0 + float(np.max(np.abs(ref)))) if ref.size else 1e-7)
+    tol = np.full(ref.shape, 1e-7 * (1.0 + float(np.max(np.abs(ref[:-1]), initial=0.0))))
+    tol[-1:] = 1e-7 * (1.0 + float(np.max(np.abs(ref[-1:]), initial=0.0)))  # the potential energy on its own scale
+    return ref, tol
 
 
 def _shifted_states(problem: EquilibriumProblem, b: Equilibrium, p: np.ndarray, memo: dict | None):
@@ -217,7 +222,7 @@ def same_motion(problem: EquilibriumProblem, a: Equilibrium, b: Equilibrium, p: 
     if any(abs(a.rates.get(c, 0.0) - b.rates.get(c, 0.0)) > 1e-7 * (1 + abs(a.rates.get(c, 0.0))) for c in a.rates):
         return False
     ref, tol = _reference(problem, a, p, memo)
-    return any(np.max(np.abs(state - ref), initial=0.0) <= tol for state in _shifted_states(problem, b, p, memo))
+    return any(bool(np.all(np.abs(state - ref) <= tol)) for state in _shifted_states(problem, b, p, memo))
 
 
 class _Motions:
@@ -230,7 +235,7 @@ class _Motions:
         self.names: list[str] | None = None
         self.rates: list[list[float]] = []
         self.refs: list[np.ndarray] = []
-        self.tols: list[float] = []
+        self.tols: list[np.ndarray] = []
 
     def _rates(self, e: Equilibrium) -> list[float]:
         """The rates in the kept motions' order (one problem's motions share the rates' names)."""
@@ -247,7 +252,7 @@ class _Motions:
         refs, tols = np.array(self.refs), np.array(self.tols)
         same = np.zeros(len(refs), dtype=bool)
         for state in _shifted_states(self.problem, e, self.p, self.memo):
-            same |= np.max(np.abs(refs - state), axis=1, initial=0.0) <= tols
+            same |= np.all(np.abs(refs - state) <= tols, axis=1)
         hits = np.flatnonzero(match & same)
         return int(hits[0]) if hits.size else None
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from functools import cached_property
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Sequence
 
 import numpy as np
 import sympy as sp
@@ -131,29 +131,40 @@ class EquilibriumProblem:
         self.rate_unknowns = [c for c in self.cyclic if c not in self.fixed_rates]
         self.angles = self._periodic_angles()
 
-    def _periodic_angles(self) -> dict[str, bool]:
+    def _periodic_angles(self, values: Sequence[np.ndarray] = ()) -> dict[str, bool]:
         """model.angles, less the free angles the rest equations are not 2 pi-periodic in (checked at two random
-        points): a torsional spring's k*theta makes theta = 5.6 and theta = 5.6 - 2 pi different states, and
-        wrapped they were one (a pendulum with a spring and a torque had 'no equilibrium' in th = 0:7, and a
-        sweep's branch jumped by 2 pi). A constant torque keeps F periodic (its potential is not)."""
+        points, at the file's parameter values and at each of ``values``): a torsional spring's k*theta makes
+        theta = 5.6 and theta = 5.6 - 2 pi different states, and wrapped they were one (a pendulum with a spring
+        and a torque had 'no equilibrium' in th = 0:7, and a sweep's branch jumped by 2 pi). A constant torque keeps
+        F periodic (its potential is not)."""
         angles = dict(self.model.angles)
         names = [c for c in self.free if angles.get(c, False)]
         if not names or not self.unknowns:
             return angles
-        p = parameter_values(self.model)
         rng = np.random.default_rng(5)
-        for _ in range(2):
-            z = rng.uniform(-np.pi, np.pi, len(self.unknowns))
-            F = self.F(z, p)
-            for c in names:
-                shifted = z.copy()
-                shifted[self.free.index(c)] += 2 * np.pi
-                G = self.F(shifted, p)
-                if np.all(np.isfinite(F)) and np.all(np.isfinite(G)) and \
-                        np.max(np.abs(G - F)) > 1e-9 * (1 + float(np.max(np.abs(F)))):
-                    angles[c] = False
+        for p in [parameter_values(self.model), *values]:
+            for _ in range(2):
+                z = rng.uniform(-np.pi, np.pi, len(self.unknowns))
+                F = self.F(z, p)
+                for c in names:
+                    shifted = z.copy()
+                    shifted[self.free.index(c)] += 2 * np.pi
+                    G = self.F(shifted, p)
+                    if np.all(np.isfinite(F)) and np.all(np.isfinite(G)) and \
+                            np.max(np.abs(G - F)) > 1e-9 * (1 + float(np.max(np.abs(F)))):
+                        angles[c] = False
         self.undefined = False  # a draw where a force is not defined says nothing about the search
         return angles
+
+    def periodic_over(self, values: Sequence[np.ndarray]) -> None:
+        """Decide again which angles wrap, with the parameter vectors a sweep visits too: a spring of stiffness k
+        swept from a file's k = 0 made theta non-periodic along the sweep, whose rows were wrapped 2 pi off (68 of
+        89) and whose folds were lost."""
+        if any(self.angles.get(c, False) for c in self.free):
+            angles = self._periodic_angles(values)
+            if angles != self.angles:
+                self.angles = angles
+                self.__dict__.pop("_angle_mask", None)  # the wrapping of is_angle(), decided from them
 
     # ------------------------------------------------------------------------------------- symbols
     def _q(self, name: str) -> sp.Symbol:
