@@ -570,3 +570,12 @@ def test_a_sweep_decides_the_angles_periodicity_over_the_swept_values():
     assert len(want) == 6 and len(folds) == len(want)
     for (k, th), (k_want, th_want) in zip(folds, want):
         assert k == pytest.approx(k_want, abs=1e-6) and th == pytest.approx(th_want, abs=1e-6)
+
+
+def test_a_cyclic_coordinate_not_reduced_because_of_constraints_is_named():
+    """A governor with its sleeve tied by a holonomic constraint spins steadily at der(psi) = 10 (th = 0.339104),
+    but with constraints the cyclic spindle is not reduced: the search looks for rests only. It said 'no
+    equilibrium found ... widen it with --search'; the message now says why."""
+    data = equilibria(BEYOND / "porter_governor.yaml")
+    assert data["equilibria"] == []
+    assert "with constraints the cyclic coordinate(s) psi are not reduced" in data["message"]

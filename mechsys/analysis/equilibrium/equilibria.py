@@ -121,7 +121,10 @@ class EquilibriumProblem:
             raise AnalysisError("the equations depend explicitly on time (non-autonomous): there are no "
                                 "equilibria in the ordinary sense")
         self.eq = model.equations(INTERNAL_METHOD)
-        self.cyclic = [c for c in model.cyclic_coordinates() if not model.kin.constraints]
+        ignorable = model.cyclic_coordinates()
+        self.cyclic = [c for c in ignorable if not model.kin.constraints]
+        #: cyclic coordinates not reduced because of constraints (steady motions spinning them are not sought)
+        self.unreduced = [] if self.cyclic else list(ignorable)
         self.free = [c for c in model.coordinates if c not in self.cyclic]
         self.nq = len(self.free)
         self.m = len(model.kin.constraints)
@@ -948,12 +951,16 @@ def find_equilibria(model: MechanicalModel, search: dict[str, tuple[float, float
     undefined = ("the forces are not defined at some points the search met (a log or square root of a negative "
                  "number, a division by zero): no root is found there or at the edge of their domain"
                  if problem.undefined else "")
-    message = "; ".join(m for m in (message, chart_note, singular_note(problem, dropped), undefined) if m)
+    unreduced = getattr(problem, "unreduced", [])
+    unreduced = (f"with constraints the cyclic coordinate(s) {', '.join(unreduced)} are not reduced: only states "
+                 f"at rest are sought, not steady motions at a constant rate of {', '.join(unreduced)} "
+                 f"(equilibria.md §2.3; `simulate` follows such a motion)" if unreduced else "")
+    message = "; ".join(m for m in (message, chart_note, singular_note(problem, dropped), undefined, unreduced) if m)
     equilibria.sort(key=_order)
     if not equilibria:
         message = (f"no equilibrium found: {plan.text()}; widen it with --search" if plan is not None
                    else "no equilibrium: the equations have no real root (exhaustive search)")
-        message = "; ".join(m for m in (message, undefined) if m)
+        message = "; ".join(m for m in (message, undefined, unreduced) if m)
     split = getattr(problem, "split", None)
     return EquilibriaResult(equilibria, message, problem.cyclic, dict(problem.fixed_rates), plan, exact,
                             split.text() if split is not None else "", problem)
