@@ -151,3 +151,28 @@ def test_compiled_blocks_equal_lagranges_symbolic_jacobians(name, tmp_path, cach
                 continue
             expected = np.array(compile_exprs(list(mat), args)(*q, *u, *lam, *p), dtype=float).reshape(mat.shape)
             np.testing.assert_allclose(blocks[key], expected, rtol=1e-10, atol=1e-10 * max(1.0, np.abs(expected).max()))
+
+
+def test_with_overrides_copies_share_the_compiled_rest_equations(monkeypatch):
+    """A copy with other values (a sweep's task, the re-charted problem of each root at a gimbal lock) uses the
+    code compiled for the first: the family-rate test and F, J are generated once (a 6-box spherical chain's
+    `modes` generated them again for each of its 23 roots at a lock). The copy's results equal those of the same
+    model loaded afresh with the values."""
+    from mechsys.numeric import lambdify
+
+    monkeypatch.delenv("MECHSYS_CACHE", raising=False)
+    monkeypatch.setattr(cache, "cache_dir", lambda: None)
+    base = mechsys.load(SYSTEMS_DIR / "centrifuge.yaml")
+    rng = np.random.default_rng(4)
+    _evaluations(base, np.random.default_rng(5))
+    generated = []
+    real = lambdify.generate_source
+    monkeypatch.setattr(lambdify, "generate_source", lambda *a, **k: generated.append(1) or real(*a, **k))
+    monkeypatch.setattr(eqm, "generate_source", lambda *a, **k: generated.append(1) or real(*a, **k))
+    copy = base.with_overrides({"dM": 0.7})
+    got = _evaluations(copy, rng)[:8]
+    assert generated == []
+    fresh = mechsys.load(SYSTEMS_DIR / "centrifuge.yaml", {"dM": "0.7"})
+    want = _evaluations(fresh, np.random.default_rng(4))[:8]
+    for a, b in zip(got, want):
+        assert np.array_equal(a, b)

@@ -457,10 +457,10 @@ class Builder:
             raise self.doc.error(cp + ("frame",) if c.frame else cp + ("link",),
                                  f"the contact vector is given in axes that turn with '{c.link}' "
                                  f"({'frame' if c.frame else 'the default frame, the link itself'}), so it is a point "
-                                 f"fixed in the link, not the contact: its rows would pin that point. Give 'frame' a "
-                                 f"link in whose axes the contact stays the same vector as the body rolls (for a disk or "
-                                 f"wheel a frame that leans with it but does not spin, for a ball 'ground'); to pin a "
-                                 f"point, use point_on_point or point_on_plane")
+                                 f"fixed in the link, not the contact: its rows would pin that point. Give 'frame' "
+                                 f"a link in whose axes the contact stays the same vector as the body rolls (for a "
+                                 f"disk or wheel a frame that leans with it but does not spin, for a ball 'ground'); "
+                                 f"to pin a point, use point_on_point or point_on_plane")
         contact = body.origin + r_rel
         v_link = body.home_R * body.v + body.omega_ground.cross(r_rel)
         surface = self.frame(c.on, cp + ("on",))

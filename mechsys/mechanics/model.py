@@ -27,6 +27,8 @@ INTERNAL_METHOD = "kane"
 #: What a model decides at its parameter values and keeps in its __dict__: a with_overrides copy (a sweep's task)
 #: decides them again. A rod of mass 0 leaves its angle free of every force, so cyclic; the copy of mass 1 took
 #: that decision over and vibrated about a wrong steady motion (damping ratio -402).
+#: memos of compiled code and derived models, valid at any parameter values: shared with with_overrides copies
+SHARED_MEMOS = ("_equilibrium_memo",)
 VALUE_DEPENDENT = ("cyclic_decision", "_autonomous")
 
 
@@ -143,6 +145,8 @@ class MechanicalModel:
         # change initial values alone, and the check of a rolling ball's zero rows took 0.17 s per window)
         if numeric != self.doc.numeric_parameters() and not decisions_hold(self.kin, numeric):
             return MechanicalModel(doc)  # these values change the structure (a constraint row vanishes or not)
+        for name in SHARED_MEMOS:  # created here, so that the clone shares them (compiled once for all copies)
+            self.__dict__.setdefault(name, {})
         clone = copy.copy(self)
         clone.doc = doc
         for name in VALUE_DEPENDENT:  # decided at the parameter values: decided again at the clone's

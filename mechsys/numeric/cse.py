@@ -18,7 +18,7 @@ from sympy.simplify import cse_main
 
 from mechsys.mechanics.dag import Interner
 
-__all__ = ["cse", "match_common_args"]
+__all__ = ["cse", "interned", "match_common_args"]
 
 
 def cse(exprs: Sequence[sp.Expr], symbols: Iterator[sp.Symbol] | None = None,
@@ -26,9 +26,7 @@ def cse(exprs: Sequence[sp.Expr], symbols: Iterator[sp.Symbol] | None = None,
     """sympy.cse(exprs, symbols, order) with match_common_args below, over the expressions interned (one object
     per value, dag.Interner): cse keys subexpressions by value, and equal ones built apart are compared through
     their whole trees (a 10-box chain of spherical joints: 70 million comparisons, 37 s of its first `simulate`)."""
-    clear_cache()  # its entries hold equal nodes over other argument objects: those would be compared deep
-    one = Interner()
-    exprs = [one.of(e) if isinstance(e, sp.Basic) else e for e in exprs]
+    exprs = interned(exprs)
     original = getattr(cse_main, "match_common_args", None)
     if original is None:  # a sympy without it: its own cse
         return sp.cse(exprs, symbols=symbols, order=order)
@@ -37,6 +35,15 @@ def cse(exprs: Sequence[sp.Expr], symbols: Iterator[sp.Symbol] | None = None,
         return cse_main.cse(exprs, symbols=symbols, order=order)
     finally:
         cse_main.match_common_args = original
+
+
+def interned(exprs: Sequence) -> list:
+    """The expressions with one object per value (dag.Interner), sympy's cache cleared first: its entries hold
+    equal nodes over other argument objects, which a lookup would compare through their whole trees. What keys
+    subexpressions by value (cse, tree_cse) then meets equal ones as one object."""
+    clear_cache()
+    one = Interner()
+    return [one.of(e) if isinstance(e, sp.Basic) else e for e in exprs]
 
 
 class _Tracker:

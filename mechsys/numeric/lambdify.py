@@ -206,8 +206,10 @@ def light_cse(exprs: list[sp.Expr], symbols: Iterator[sp.Symbol] | None = None) 
         from sympy.simplify.cse_main import tree_cse
     except ImportError:  # pragma: no cover - another sympy layout
         return sp.cse(exprs, symbols=symbols, order="none")
+    from mechsys.numeric.cse import interned
+
     # (tree_cse skips the names the inputs use)
-    return tree_cse(exprs, symbols if symbols is not None else sp.numbered_symbols("x"), None, "none")
+    return tree_cse(interned(exprs), symbols if symbols is not None else sp.numbered_symbols("x"), None, "none")
 
 
 @dataclass

@@ -273,9 +273,9 @@ def summary_table(result: SimulationResult) -> list[Table]:
     t.notes += result.warnings
     if not result.conservative:
         t.notes.append("energy balance: E(t) - E(0) - W(t) + (energy lost in impacts up to t), W the work of the "
-                       "non-conservative forces (damping, applied forces, drives, moving constraints, joints or springs "
-                       "moving with t; a fourth-order "
-                       "quadrature on the output grid); relative to max(|E(0)|, max T, max |W|)")
+                       "non-conservative forces (damping, applied forces, drives, moving constraints, joints or "
+                       "springs moving with t; a fourth-order quadrature on the output grid); relative to "
+                       "max(|E(0)|, max T, max |W|)")
         if result.work is not None and result.energy_balance_error <= 3 * result.work_quadrature_error:
             t.notes.append("the energy balance error is of the size of the quadrature error of W on this output "
                            "grid: a finer --dt tells the integration's own error")

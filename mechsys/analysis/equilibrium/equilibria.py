@@ -204,17 +204,24 @@ class EquilibriumProblem:
         fixed = {}
         if not self.cyclic:
             return fixed
-        # each shared node substituted once (residual_exprs' way): xreplace walked the 3-D chain's f as a tree, 50 s
-        F = Substitution(self.rest_substitution).matrix(self.eq.f)
+        # each shared node substituted once (residual_exprs' way): xreplace walked the 3-D chain's f as a tree, 50 s;
+        # compiled once per model and split, kept with the compiled equations (shared by with_overrides copies: the
+        # re-charted problem of each root at a gimbal lock compiled it again, 12 s each on a 6-box chain)
+        store = self.model.__dict__.setdefault("_equilibrium_memo", {})
+        key = ("family", tuple(self.cyclic))
+        if key not in store:
+            F = Substitution(self.rest_substitution).matrix(self.eq.f)
+            # what F can depend on at rest besides the parameters (F.free_symbols walked the shared tree: 20 s)
+            syms = [self._q(c) for c in self.free] + [self._u(c) for c in self.cyclic]
+            store[key] = ([F[self.model.coordinates.index(c)] == 0 for c in self.cyclic], len(syms),
+                          compile_exprs(list(F), syms + self.model.parameter_symbols) if syms else None)
+        zero, size, fn = store[key]
         rng = np.random.default_rng(2)
-        # what F can depend on at rest besides the parameters (F.free_symbols walked the shared tree: 20 s)
-        syms = [self._q(c) for c in self.free] + [self._u(c) for c in self.cyclic]
-        fn = compile_exprs(list(F), syms + self.model.parameter_symbols) if syms else None
         p = list(parameter_values(self.model))
-        for c in self.cyclic:
+        for c, vanishes in zip(self.cyclic, zero):
             i = self.model.coordinates.index(c)
-            if F[i] == 0 or (fn is not None and all(
-                    abs(fn(*rng.uniform(-2, 2, len(syms)), *p)[i]) < 1e-12 for _ in range(4))):
+            if vanishes or (fn is not None and all(
+                    abs(fn(*rng.uniform(-2, 2, size), *p)[i]) < 1e-12 for _ in range(4))):
                 fixed[c] = self.model.doc.initial_rate[c]
         return fixed
 

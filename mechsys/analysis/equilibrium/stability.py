@@ -238,14 +238,22 @@ def energy_verdict(problem: EquilibriumProblem, e: Equilibrium, p: np.ndarray, z
     dissipative, complete, why, positional = _dissipation(problem, e, p)
     if not dissipative:
         return "undecided", prefix + why
-    try:
-        U, qn = _effective_potential(problem, e)
-    except _MasslessCyclic as exc:
-        return "undecided", prefix + str(exc)
     q0 = np.array([e.coordinates[c] for c in problem.free], dtype=float)
-    if not qn:
-        return "stable", prefix + "no positional degrees of freedom and no energy input"
-    H = _hessian(U, qn, problem, q0, p) - positional  # curl-free positional forces belong to the potential
+    if not problem.cyclic and not problem.m and problem.free:
+        # a rest without cyclic coordinates or constraints: U = V, and the rest equations are F = -dV/dq + Q0(q),
+        # so Hess V - dQ0/dq is -dF/dq, the compiled Jacobian at the root (the symbolic Hessian of V took 90 s of
+        # a 6-box spherical chain's `modes`); U itself only for the higher-order test below
+        qn = [problem.model.doc.coords[c] for c in problem.free]
+        H = -problem.J(problem.state(e), p)[:len(qn), :len(qn)]
+        U = None
+    else:
+        try:
+            U, qn = _effective_potential(problem, e)
+        except _MasslessCyclic as exc:
+            return "undecided", prefix + str(exc)
+        if not qn:
+            return "stable", prefix + "no positional degrees of freedom and no energy input"
+        H = _hessian(U, qn, problem, q0, p) - positional  # curl-free positional forces belong to the potential
     if problem.m:
         H = _constrained_hessian(problem, e, p, H)
     h = np.linalg.eigvalsh((H + H.T) / 2) if H.size else np.zeros(0)
@@ -261,6 +269,8 @@ def energy_verdict(problem: EquilibriumProblem, e: Equilibrium, p: np.ndarray, z
                                      "gyroscopic forces may still stabilize"
     null = np.linalg.eigh((H + H.T) / 2)[1][:, np.abs(h) <= htol]
     if null.shape[1] == 1 and not problem.m and len(qn) == 1:  # along a line is a proof only in one dimension
+        if U is None:
+            U, qn = _effective_potential(problem, e)
         order, value = _higher_order(U, qn, problem, q0, p, null[:, 0])
         if order and order % 2 == 0 and value > 0:
             return "stable", prefix + f"energy argument: the effective potential has a strict minimum (order-{order} " \

@@ -70,7 +70,8 @@ def _first_change(joints: list[tuple], charts: list[str], times: np.ndarray, Q: 
 
 def watched(model: MechanicalModel) -> list[tuple]:
     """(link, joint type, sequence, angle indices) of the spherical and free joints a simulation re-charts near
-    gimbal lock; [] when it cannot: closed loops or drives, contacts, events, or a rotation chart of another
+    gimbal lock (velocity constraints are derived again with the model in the other sequence); [] when it cannot:
+    closed loops or drives, contacts, events, or a rotation chart of another
     kind (universal, transform, a spherical joint with a prescribed angle). Explicit time is checked only when a
     switch is needed (``_autonomous``)."""
     memo = model.__dict__.get("_charted_watch")
@@ -80,7 +81,8 @@ def watched(model: MechanicalModel) -> list[tuple]:
 
         charts = rotation_charts(model)
         links = {c[0] for c in charts}
-        ok = bool(charts) and all(c.kind == "nonholonomic" for c in model.kin.constraints) and not model.kin.contacts and not model.events and all(
+        velocity_rows_only = all(c.kind == "nonholonomic" for c in model.kin.constraints)
+        ok = bool(charts) and velocity_rows_only and not model.kin.contacts and not model.events and all(
             j.link in links and len(names) == 3 for j, names, _sequence in rotation_joints(model))
         memo = model.__dict__["_charted_watch"] = charts if ok else []
     return memo
