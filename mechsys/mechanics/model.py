@@ -149,8 +149,9 @@ class MechanicalModel:
             self.__dict__.setdefault(name, {})
         clone = copy.copy(self)
         clone.doc = doc
-        for name in VALUE_DEPENDENT:  # decided at the parameter values: decided again at the clone's
-            clone.__dict__.pop(name, None)
+        if numeric != self.doc.numeric_parameters():
+            for name in VALUE_DEPENDENT:  # decided at the parameter values: decided again at the clone's
+                clone.__dict__.pop(name, None)
         return clone
 
     def _repr_markdown_(self) -> str:

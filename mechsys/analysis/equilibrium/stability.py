@@ -239,12 +239,14 @@ def energy_verdict(problem: EquilibriumProblem, e: Equilibrium, p: np.ndarray, z
     if not dissipative:
         return "undecided", prefix + why
     q0 = np.array([e.coordinates[c] for c in problem.free], dtype=float)
-    if not problem.cyclic and not problem.m and problem.free:
-        # a rest without cyclic coordinates or constraints: U = V, and the rest equations are F = -dV/dq + Q0(q),
-        # so Hess V - dQ0/dq is -dF/dq, the compiled Jacobian at the root (the symbolic Hessian of V took 90 s of
-        # a 6-box spherical chain's `modes`); U itself only for the higher-order test below
+    if not problem.m and problem.free and not any(e.rates.values()):
+        # a rest (cyclic coordinates at rest too, so no Routh term) without constraints: U = V, and the rest
+        # equations of the free coordinates are -dV/dq + Q0(q), so Hess V - dQ0/dq is minus their compiled
+        # Jacobian at the root (the symbolic Hessian of V took 90 s of a 6-box spherical chain's `modes`); U itself
+        # only for the higher-order test below
         qn = [problem.model.doc.coords[c] for c in problem.free]
-        H = -problem.J(problem.state(e), p)[:len(qn), :len(qn)]
+        rows = [problem.model.coordinates.index(c) for c in problem.free]
+        H = -problem.J(problem.state(e), p)[np.ix_(rows, range(len(qn)))]
         U = None
     else:
         try:
