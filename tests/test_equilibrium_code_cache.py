@@ -176,3 +176,25 @@ def test_with_overrides_copies_share_the_compiled_rest_equations(monkeypatch):
     want = _evaluations(fresh, np.random.default_rng(4))[:8]
     for a, b in zip(got, want):
         assert np.array_equal(a, b)
+
+
+@pytest.mark.parametrize("name", ["double_pendulum", "spring_chain", "beam_two_springs"])
+def test_the_energy_hessian_from_the_compiled_jacobian_is_the_symbolic_one(name):
+    """energy_verdict takes Hess V - dQ0/dq at a rest from minus the compiled Jacobian of the rest equations (the
+    symbolic Hessian of V took 90 s of a 6-box chain's `modes`): the same matrix as the symbolic path, at every
+    rest the search finds."""
+    from mechsys.analysis.equilibrium import stability
+
+    from helpers import DATA_DIR
+
+    model = mechsys.load(next(d / f"{name}.yaml" for d in (SYSTEMS_DIR, DATA_DIR) if (d / f"{name}.yaml").exists()))
+    result = eqm.find_equilibria(model)
+    problem, p = result.problem, parameter_values(model)
+    assert result.equilibria and not problem.cyclic and not problem.m
+    for e in result.equilibria:
+        U, qn = stability._effective_potential(problem, e)
+        q0 = np.array([e.coordinates[c] for c in problem.free])
+        symbolic = stability._hessian(U, qn, problem, q0, p) - stability._dissipation(problem, e, p)[3]
+        rows = [model.coordinates.index(c) for c in problem.free]
+        compiled = -problem.J(problem.state(e), p)[np.ix_(rows, range(len(qn)))]
+        assert np.allclose(compiled, symbolic, rtol=1e-9, atol=1e-9 * max(1.0, float(np.max(np.abs(symbolic)))))
