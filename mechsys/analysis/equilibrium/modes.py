@@ -308,13 +308,13 @@ def vibration_modes(model: MechanicalModel, at: dict[str, float] | None = None,
                                      f"{max(v.real for v in growing):.6g} 1/s): the motion grows although no "
                                      f"stiffness is negative, and the damping ratios above (modal, §5) do not show "
                                      f"it") if x)
-    damped = _damped_condensed(red, lin, condensed)
+    damped = _damped_condensed(red, condensed)
     if damped:
         note = "; ".join(x for x in (note, damped) if x)
     return Modes(names, e, freqs, shapes, rigid, zeta, vals, condensed, unstable, red, note, _coupling(red, vals))
 
 
-def _damped_condensed(red: ReducedSystem, lin: Linearization, condensed: list[str]) -> str:
+def _damped_condensed(red: ReducedSystem, condensed: list[str]) -> str:
     """A note when dampers act on statically condensed (massless) coordinates: the modes, the state space and the
     transfer function then hold the condensed system, an approximation (a spring and a damper in series behind a
     massless node: third order, two poles shown); --frf is exact."""
