@@ -168,7 +168,9 @@ def sweep_tables(result: SweepResult) -> list[Table]:
 
 
 def modes_tables(modes: Modes) -> list[Table]:
-    t = Table(f"natural frequencies about {', '.join(f'{c} = {fmt_number(v)}' for c, v in modes.equilibrium.coordinates.items()) or 'the equilibrium'}",
+    where = ", ".join(f"{c} = {fmt_number(v)}" for c, v in modes.equilibrium.coordinates.items()) or "the equilibrium"
+    rates = ", ".join(f"der({c}) = {fmt_number(v)}" for c, v in modes.equilibrium.rates.items())
+    t = Table(f"natural frequencies about {where}{f' with {rates}' if rates else ''}",
               ["mode", "frequency [rad/s]", "frequency [Hz]", "damping ratio", "rigid body"])
     for k, (w, z, r) in enumerate(zip(modes.frequencies, modes.damping_ratios, modes.rigid_body), start=1):
         t.add(k, float(w), float(w / (2 * np.pi)), float(z), "yes" if r else "")
