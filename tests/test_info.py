@@ -209,7 +209,7 @@ def test_a_chain_s_angles_are_shown_not_cyclic_without_compiled_code(tmp_path, m
     """Issue 13: the cyclic decision compiled M and f whole (29 s of the 80-link chain's `info`). Shifting one
     angle changes a few small entries: evaluated in floating point (symmetry._Entries), no code is compiled. The
     first angle changes f only (gravity); without gravity it is cyclic (the chain turns as a whole: closed form),
-    which the compiled test confirms."""
+    which the shift test confirms, walking the equations at its states (dag.Points): still nothing compiled."""
     from mechsys.mechanics import symmetry
 
     monkeypatch.setenv("MECHSYS_CACHE", "off")
@@ -222,7 +222,7 @@ def test_a_chain_s_angles_are_shown_not_cyclic_without_compiled_code(tmp_path, m
         compiled.clear()
         decision = mechsys.load(path).cyclic_decision
         assert decision.names == cyclic
-        assert (compiled == []) is gravity
+        assert compiled == []
 
 
 MODELS = sorted([*(ROOT / "systems").glob("*.yaml"), *(ROOT / "tests" / "data" / "beyond").glob("*.yaml")])
@@ -239,3 +239,48 @@ def test_the_uncompiled_first_test_decides_as_the_compiled_one_alone(path, monke
     monkeypatch.setattr(symmetry._Entries, "dependent", lambda self, q: False)
     alone = mechsys.load(path).cyclic_decision
     assert (with_first.names, with_first.basis, with_first.denied) == (alone.names, alone.basis, alone.denied)
+
+
+@pytest.mark.parametrize("path", MODELS, ids=[p.stem for p in MODELS])
+def test_the_walked_shift_test_decides_as_the_compiled_one(path, monkeypatch):
+    """The shift test evaluates M, f, A, b and Phi by one walk over all its states (dag.Points) instead of
+    compiling them: the same cyclic coordinates and bases as with the compiled functions, on every bundled model
+    and the user-written ones."""
+    from mechsys.mechanics import symmetry
+
+    monkeypatch.setenv("MECHSYS_CACHE", "off")
+    walked = mechsys.load(path).cyclic_decision
+    monkeypatch.setattr(symmetry._Shifts, "_walked", lambda self, k, walk, count: None)
+    compiled = mechsys.load(path).cyclic_decision
+    assert (walked.names, walked.basis, walked.denied) == (compiled.names, compiled.basis, compiled.denied)
+
+
+def test_points_evaluates_as_compiled_code_at_every_point():
+    """dag.Points gives what the compiled matrix gives at each point (the bicycle's M, f, A, b), to round-off;
+    nan outside the reals, None for a node it does not know."""
+    import numpy as np
+    import sympy as sp
+
+    from mechsys.mechanics.dag import Points
+    from mechsys.numeric.lambdify import compile_matrix
+
+    model = mechsys.load(ROOT / "systems" / "bicycle.yaml")
+    eq = model.equations("kane")
+    rng = np.random.default_rng(5)
+    k = 6
+    q, u = rng.uniform(-2, 2, (k, len(model.q))), rng.uniform(-2, 2, (k, len(model.u)))
+    p = np.array([model.parameters[s.name] for s in model.parameter_symbols])
+    values = {model.t: np.zeros(k), **{s: q[:, j] for j, s in enumerate(model.q)},
+              **{s: u[:, j] for j, s in enumerate(model.u)}, **dict(zip(model.parameter_symbols, p))}
+    walk = Points(values)
+    for mat in (eq.M, eq.f, eq.A, eq.b):
+        fn = compile_matrix(mat, model.t, model.q, model.u, model.parameter_symbols)
+        walked = np.array([np.broadcast_to(walk.of(e), (k,)) for e in mat]).T
+        for s in range(k):
+            want = np.asarray(fn(0.0, q[s], u[s], p), dtype=float).ravel()
+            assert np.allclose(walked[s], want, rtol=1e-12, atol=1e-12 * max(1.0, np.abs(want).max()))
+    x = sp.Symbol("x")
+    out = Points({x: np.array([4.0, -4.0])}).of(sp.sqrt(x) + x**3)
+    assert out[0] == 2.0 + 64.0 and np.isnan(out[1])
+    assert Points({x: np.array([1.0])}).of(sp.Piecewise((x, x > 0), (0, True))) is None
+    assert Points({}).of(x + 1) is None

@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 from typing import Iterable, Mapping, Optional
 
+import numpy as np
 import sympy as sp
 
 #: node types whose free symbols are exactly the union of their arguments' (no bound variables)
@@ -199,6 +200,80 @@ class Evaluation:
             memo[id(node)] = (node, result)
             stack.pop()
         return memo[id(root)][1]
+
+
+#: the functions Points evaluates, by sympy type (numpy's, elementwise)
+_NUMPY = {sp.sin: np.sin, sp.cos: np.cos, sp.tan: np.tan, sp.asin: np.arcsin, sp.acos: np.arccos,
+          sp.atan: np.arctan, sp.sinh: np.sinh, sp.cosh: np.cosh, sp.tanh: np.tanh, sp.exp: np.exp,
+          sp.log: np.log, sp.Abs: np.abs, sp.sign: np.sign}
+
+
+class Points:
+    """``of(expr)``: the values of expressions at several points at once, as numpy arrays (one element per point),
+    each shared node computed once across all of them: what a compiled function called at each point gives, to
+    round-off, without generating or compiling code (a bicycle's M, f, A, b at the cyclic test's eight states: one
+    walk instead of a CSE and an exec). A value outside the reals is nan, an overflow inf. None when a symbol has
+    no value or a node is not a sum, product, power, number or elementary function."""
+
+    def __init__(self, values: Mapping[sp.Symbol, np.ndarray]) -> None:
+        self.values = {k: np.asarray(v, dtype=float) for k, v in values.items()}
+        self._memo: dict[int, tuple[sp.Basic, Optional[np.ndarray]]] = {}
+
+    def of(self, expr: sp.Basic) -> Optional[np.ndarray]:
+        root = sp.sympify(expr)
+        memo = self._memo
+        stack = [root]
+        with np.errstate(all="ignore"):
+            while stack:  # iterative post-order, like Evaluation
+                node = stack[-1]
+                if id(node) in memo:
+                    stack.pop()
+                    continue
+                if node.is_Symbol:
+                    result = self.values.get(node)
+                elif node.is_Number or node.is_NumberSymbol:
+                    result = _number(node)
+                else:
+                    waiting = [a for a in node.args if id(a) not in memo]
+                    if waiting:
+                        stack.extend(waiting)
+                        continue
+                    args = [memo[id(a)][1] for a in node.args]
+                    result = None if any(a is None for a in args) else _apply_arrays(node, args)
+                memo[id(node)] = (node, result)
+                stack.pop()
+        return memo[id(root)][1]
+
+
+def _number(node: sp.Basic) -> Optional[float]:
+    try:
+        return float(node)
+    except (TypeError, ValueError):
+        return None  # a complex number: outside the walk
+
+
+def _apply_arrays(node: sp.Basic, args: list) -> Optional[np.ndarray]:
+    """The node's values from its arguments' (numpy, elementwise); None outside the supported nodes."""
+    if node.is_Add:
+        out = args[0]
+        for a in args[1:]:
+            out = out + a
+        return out
+    if node.is_Mul:
+        out = args[0]
+        for a in args[1:]:
+            out = out * a
+        return out
+    if node.is_Pow:
+        base, exp = args
+        if isinstance(exp, float) and exp.is_integer():
+            return np.asarray(base, dtype=float) ** int(exp)  # a negative base to a whole power is real
+        return np.power(np.asarray(base, dtype=float), exp)
+    if type(node) is sp.atan2:
+        return np.arctan2(*args)
+    if type(node) in _NUMPY and len(args) == 1:
+        return _NUMPY[type(node)](args[0])
+    return None
 
 
 def _finite(x: object) -> Optional[tuple[float, float]]:

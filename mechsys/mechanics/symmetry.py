@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import sympy as sp
 
-from mechsys.mechanics.dag import Evaluation, FreeSymbols
+from mechsys.mechanics.dag import Evaluation, FreeSymbols, Points
 
 if TYPE_CHECKING:
     from mechsys.mechanics.model import MechanicalModel
@@ -59,6 +59,7 @@ def decide(model: MechanicalModel) -> CyclicDecision:
     generic = values * np.random.default_rng(17).uniform(0.7, 1.3, len(values))
     check = _Shifts(model, parts)
     quick = _Entries(model, parts, symbols, generic)
+    sizes: dict = {}  # _size's memo: the entries share their subtrees
     for i, (name, q) in enumerate(zip(model.coordinates, model.q)):
         if declared.get(name) is False:
             continue
@@ -75,17 +76,17 @@ def decide(model: MechanicalModel) -> CyclicDecision:
             out.basis[name] = "absent"
         elif not quick.dependent(q) and check.independent(i, generic):
             out.names.append(name)
-            out.basis[name] = "symbolic" if _proven_constant([e for m in parts for e in m if symbols.has(e, q)], q) \
-                else "numeric"
+            entries = [e for m in parts for e in m if symbols.has(e, q)]
+            out.basis[name] = "symbolic" if _proven_constant(entries, q, sizes) else "numeric"
     return out
 
 
-def _proven_constant(exprs: list[sp.Expr], q: sp.Symbol) -> bool:
+def _proven_constant(exprs: list[sp.Expr], q: sp.Symbol, sizes: dict | None = None) -> bool:
     """Every entry proven constant in q (_constant_in), the smallest first (a failure ends the proof early);
-    False without trying when together they exceed SYMBOLIC_BUDGET operations."""
+    False without trying when together they exceed SYMBOLIC_BUDGET operations. ``sizes``: _size's memo."""
     sized, total = [], 0
     for k, e in enumerate(exprs):
-        size = _size(e, SYMBOLIC_BUDGET - total)
+        size = _size(e, SYMBOLIC_BUDGET - total, sizes)
         total += size
         if total > SYMBOLIC_BUDGET:
             return False
@@ -93,15 +94,24 @@ def _proven_constant(exprs: list[sp.Expr], q: sp.Symbol) -> bool:
     return all(_constant_in(exprs[k], q) for _, k in sorted(sized))
 
 
-def _size(expr: sp.Expr, limit: int) -> int:
-    """The number of nodes of the expression tree, counted up to limit + 1 only (count_ops of a bicycle's entry
-    costs more than the decision it guards)."""
-    count = 0
-    for _ in sp.preorder_traversal(expr):
-        count += 1
-        if count > limit:
-            break
-    return count
+def _size(expr: sp.Expr, limit: int, sizes: dict | None = None) -> int:
+    """The number of nodes of the expression tree (every path counted, as preorder_traversal visits them), up
+    to limit + 1 (count_ops of a bicycle's entry costs more than the decision it guards). Computed over the DAG,
+    each shared node once: ``sizes`` remembers them by object, across calls."""
+    sizes = {} if sizes is None else sizes
+    stack = [expr]
+    while stack:  # iterative post-order: deep trees never reach the recursion limit
+        node = stack[-1]
+        if id(node) in sizes:
+            stack.pop()
+            continue
+        waiting = [a for a in node.args if id(a) not in sizes]
+        if waiting:
+            stack.extend(waiting)
+            continue
+        sizes[id(node)] = (node, 1 + sum(sizes[id(a)][1] for a in node.args))
+        stack.pop()
+    return min(sizes[id(expr)][1], limit + 1)
 
 
 class _Entries:
@@ -133,13 +143,15 @@ class _Entries:
 
 
 class _Shifts:
-    """M, f, A, b compiled one by one as needed (the first that changes decides); compares them at random states
-    with one coordinate shifted."""
+    """M, f, A, b and Phi at random states with one coordinate shifted, compared (the first that changes decides).
+    Evaluated by one walk of their shared nodes over all the states at once (dag.Points); a matrix with a node the
+    walk does not know is compiled instead (numeric/lambdify.py), as a whole."""
 
     def __init__(self, model, parts: list[sp.Matrix]) -> None:
         from mechsys.numeric.lambdify import compile_matrix
 
         self.model = model
+        self.parts = parts
         self.fns: list = [None] * len(parts)
         self._compile = lambda k: compile_matrix(parts[k], model.t, model.q, model.u, model.parameter_symbols,
                                                  light=True)  # evaluated at a few states only
@@ -158,21 +170,55 @@ class _Shifts:
             shifted = q.copy()
             shifted[i] += rng.uniform(0.4, 2.6)
             samples.append((t, q, shifted, u))
-        for k in range(len(self.fns)):
-            fn = self._fn(k)
-            for t, q, shifted, u in samples:
-                try:
-                    with np.errstate(all="ignore"):
-                        a = np.asarray(fn(t, q, u, p), dtype=float)
-                        b = np.asarray(fn(t, shifted, u, p), dtype=float)
-                except (ValueError, ArithmeticError):
-                    return False  # undefined there (sqrt of a negative value): no symmetry claimed from it
+        walk = self._points(samples, p)
+        for k in range(len(self.parts)):
+            pairs = self._walked(k, walk, len(samples))
+            if pairs is None:
+                pairs = self._called(k, samples, p)
+            if pairs is None:
+                return False  # undefined there (sqrt of a negative value): no symmetry claimed from it
+            for a, b in pairs:
                 if not (np.all(np.isfinite(a)) and np.all(np.isfinite(b))):
                     return False  # a singular state: do not claim a symmetry from it
                 scale = max(1.0, float(np.max(np.abs(a))), float(np.max(np.abs(b))))
                 if np.max(np.abs(a - b)) > ROUND_OFF * scale:
                     return False
         return True
+
+    def _points(self, samples: list, p: np.ndarray) -> Points:
+        """The walk over the states: sample s at point 2s, its shifted twin at 2s + 1."""
+        model = self.model
+        ts = np.repeat([t for t, _, _, _ in samples], 2)
+        qs = np.array([q for _, base, shifted, _ in samples for q in (base, shifted)])
+        us = np.repeat([u for _, _, _, u in samples], 2, axis=0)
+        values = {model.t: ts, **{s: qs[:, j] for j, s in enumerate(model.q)},
+                  **{s: us[:, j] for j, s in enumerate(model.u)},
+                  **{s: np.full(len(ts), v) for s, v in zip(model.parameter_symbols, p)}}
+        return Points(values)
+
+    def _walked(self, k: int, walk: Points, count: int) -> list[tuple[np.ndarray, np.ndarray]] | None:
+        """(values at the state, values shifted) of part k per sample, from the walk; None if it cannot."""
+        columns = []
+        for e in self.parts[k]:
+            v = walk.of(e)
+            if v is None:
+                return None
+            columns.append(np.broadcast_to(np.asarray(v, dtype=float), (2 * count,)))
+        table = np.array(columns)
+        return [(table[:, 2 * s], table[:, 2 * s + 1]) for s in range(count)]
+
+    def _called(self, k: int, samples: list, p: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]] | None:
+        """The same from part k compiled; None where it raises (outside its domain)."""
+        fn = self._fn(k)
+        out = []
+        for t, q, shifted, u in samples:
+            try:
+                with np.errstate(all="ignore"):
+                    out.append((np.asarray(fn(t, q, u, p), dtype=float).ravel(),
+                                np.asarray(fn(t, shifted, u, p), dtype=float).ravel()))
+            except (ValueError, ArithmeticError):
+                return None
+        return out
 
 
 def _constant_in(expr: sp.Expr, q: sp.Symbol) -> bool:
