@@ -239,16 +239,9 @@ def energy_verdict(problem: EquilibriumProblem, e: Equilibrium, p: np.ndarray, z
     if not dissipative:
         return "undecided", prefix + why
     q0 = np.array([e.coordinates[c] for c in problem.free], dtype=float)
-    if not problem.m and problem.free and not any(e.rates.values()):
-        # a rest (cyclic coordinates at rest too, so no Routh term) without constraints: U = V, and the rest
-        # equations of the free coordinates are -dV/dq + Q0(q), so Hess V - dQ0/dq is minus their compiled
-        # Jacobian at the root (the symbolic Hessian of V took 90 s of a 6-box spherical chain's `modes`); U itself
-        # only for the higher-order test below
-        qn = [problem.model.doc.coords[c] for c in problem.free]
-        rows = [problem.model.coordinates.index(c) for c in problem.free]
-        H = -problem.J(problem.state(e), p)[np.ix_(rows, range(len(qn)))]
-        U = None
-    else:
+    H = _compiled_hessian(problem, e, p) if not problem.m and problem.free else None
+    U = None
+    if H is None:
         try:
             U, qn = _effective_potential(problem, e)
         except _MasslessCyclic as exc:
@@ -256,6 +249,9 @@ def energy_verdict(problem: EquilibriumProblem, e: Equilibrium, p: np.ndarray, z
         if not qn:
             return "stable", prefix + "no positional degrees of freedom and no energy input"
         H = _hessian(U, qn, problem, q0, p) - positional  # curl-free positional forces belong to the potential
+    elif isinstance(H, str):
+        return "undecided", prefix + H
+    qn = [problem.model.doc.coords[c] for c in problem.free]
     if problem.m:
         H = _constrained_hessian(problem, e, p, H)
     h = np.linalg.eigvalsh((H + H.T) / 2) if H.size else np.zeros(0)
@@ -330,8 +326,49 @@ def _dissipation(problem, e, p: np.ndarray) -> tuple[bool, bool, str, np.ndarray
     return True, complete, "", (positional + positional.T) / 2
 
 
+def _compiled_hessian(problem, e, p: np.ndarray) -> np.ndarray | str | None:
+    """Hess U - dQ0/dq over the free coordinates of an unconstrained problem, from the compiled linearization at
+    the steady motion (the symbolic Hessian of Routh's potential took 30 s of a spinning 6-box chain's `modes`).
+    With the conserved momenta p_c = M_cc u_c + b_c of the cyclic coordinates, U = V - T0 + (p - b)^T M_cc^-1
+    (p - b) / 2 has the gradient -f over the free coordinates at fixed rates (f: the forcing, Q at the steady rates
+    included), and at fixed momenta the rates move with q as M_cc du_c = -G dq, G = dp_c/dq = -df_c/du over the
+    free rates (no force acts on a cyclic coordinate: _dissipation). So Hess U - dQ/dq = -df/dq + G^T M_cc^-1 G,
+    at a rest as well. Cyclic coordinates whose rates leave T with the free rates at zero carry no momentum and are
+    left out, as in _effective_potential; a singular M_cc gives its reason (a string). None where Q depends on
+    a cyclic rate (dQ/dq at the steady rates is then not dQ0/dq): the symbolic path decides."""
+    from mechsys.mechanics.dag import FreeSymbols, Substitution
+
+    model = problem.model
+    rates = {c: model.doc.rates[c] for c in problem.cyclic}
+    symbols = FreeSymbols()
+    if any(symbols.has(x, w) for x in model.generalized_forces for w in rates.values()):
+        return None
+    free_rest = Substitution({**{model.doc.rates[c]: 0 for c in problem.free}, model.t: 0}, symbols)
+    Tc = free_rest.of(model.kinetic_energy)
+    moving = [c for c, w in rates.items() if symbols.has(Tc, w)]
+    q, u = state_at(model, e.coordinates, e.rates)
+    v = pieces(model).evaluate(q, u, np.zeros(0), p)
+    s = [model.coordinates.index(c) for c in problem.free]
+    c = [model.coordinates.index(name) for name in moving]
+    H = -v["dfdq"][np.ix_(s, s)]
+    if c:
+        Mcc = v["M"][np.ix_(c, c)]
+        scale = max(1e-300, float(np.max(np.abs(Mcc))))
+        if np.linalg.matrix_rank(Mcc, tol=1e-12 * scale) < len(c):
+            zero = [name for i, name in enumerate(moving) if abs(Mcc[i, i]) <= 1e-12 * scale]
+            return _massless(zero or moving)
+        G = -v["dfdu"][np.ix_(c, s)]
+        H = H + G.T @ np.linalg.solve(Mcc, G)
+    return H
+
+
 class _MasslessCyclic(Exception):
     """The cyclic block of the mass matrix is singular: no Routh potential."""
+
+
+def _massless(names: list[str]) -> str:
+    return (f"the cyclic coordinate(s) {', '.join(names)} carry no mass or inertia at this state (singular inertia "
+            f"of the cyclic block), so Routh's amended potential is not defined")
 
 
 def _effective_potential(problem, e) -> tuple[sp.Expr, list[sp.Symbol]]:
@@ -358,9 +395,7 @@ def _effective_potential(problem, e) -> tuple[sp.Expr, list[sp.Symbol]]:
         Mnum = np.array(Mcc.xreplace(q0).xreplace(values).evalf(), dtype=float)
         if np.linalg.matrix_rank(Mnum, tol=1e-12 * max(1e-300, float(np.max(np.abs(Mnum))))) < len(cyc_u):
             zero = [c for i, c in enumerate(names) if abs(Mnum[i, i]) <= 1e-12 * max(1e-300, float(np.max(np.abs(Mnum))))]
-            raise _MasslessCyclic(
-                f"the cyclic coordinate(s) {', '.join(zero or names)} carry no mass or inertia at this state "
-                f"(singular inertia of the cyclic block), so Routh's amended potential is not defined")
+            raise _MasslessCyclic(_massless(zero or names))
         # inverse of the small cyclic block only, by adjugate and determinant: sympy's default inverse searches
         # pivots with simplify(), seconds per verdict for a rigid body's 1x1 block
         inverse = Mcc.adjugate() / Mcc.det(method="berkowitz") if Mcc.shape[0] > 1 else sp.Matrix([[1 / Mcc[0, 0]]])
