@@ -110,6 +110,27 @@ class ImpactModel:
         self.placed = [bool((jac[k, :].free_symbols | (normals[3 * k:3 * k + 3, :].free_symbols)) & set(model.q))
                        for k in range(len(contacts))]
         self._bodies = None
+        self._loops = None
+
+    def loop_items(self) -> tuple[list[str], StateFunction, StateFunction]:
+        """The constraints with a point of application as impulses on their links (analysis/motion/reactions.py's
+        constraint forces, linear in the multipliers): (link of each item, its ground-axes impulse as a function of
+        (t, q, u, parameters + multipliers of every constraint row), the Jacobian of every constraint row).
+        Compiled once."""
+        if self._loops is None:
+            from mechsys.analysis.motion.reactions import _constraints, _Items
+
+            m = self.model
+            lam = [sp.Symbol(f"_impulse{k}") for k in range(len(m.kin.constraints))]
+            items = _Items(m)
+            _constraints(items, lam)
+            forces = [e for k in range(len(items.links)) for e in items.exprs[9 * k + 3:9 * k + 6]]
+            impulses = compile_matrix(sp.Matrix(forces) if forces else sp.zeros(0, 1), m.t, m.q, m.u,
+                                      [*m.parameter_symbols, *lam])
+            rows = compile_matrix(m.constraint_jacobian if lam else sp.zeros(0, len(m.q)), m.t, m.q, m.u,
+                                  m.parameter_symbols)
+            self._loops = (items.links, impulses, rows)
+        return self._loops
 
     def bodies(self) -> list[tuple[str, StateFunction, StateFunction]]:
         """(name, mass function, centre-of-mass ground velocity function) of each massive link (compiled once)."""
@@ -407,6 +428,8 @@ def joint_impulses(model: MechanicalModel, q: np.ndarray, u_before: np.ndarray, 
         impulse = U[k] * normals[3 * k:3 * k + 3] + (tangential[k] if tangential is not None else 0.0)
         for link, _pos, sign in c["points"]:
             external[link] = external.get(link, np.zeros(3)) + sign * impulse
+    for link, impulse in _constraint_impulses(im, q, u_before, u_after, U, p, t, tangential):
+        external[link] = external.get(link, np.zeros(3)) + impulse
     children: dict[str, list[str]] = {}
     for j in model.kin.joints:
         children.setdefault(j.parent, []).append(j.link)
@@ -429,6 +452,33 @@ def joint_impulses(model: MechanicalModel, q: np.ndarray, u_before: np.ndarray, 
         total = sum((momentum.get(x, np.zeros(3)) - external.get(x, np.zeros(3)) for x in links), np.zeros(3))
         result[j.link] = [float(x) if abs(x) > 1e-12 * (1 + np.max(np.abs(total))) else 0.0 for x in total]
     return result
+
+
+def _constraint_impulses(im: ImpactModel, q: np.ndarray, u_before: np.ndarray, u_after: np.ndarray, U: np.ndarray,
+                         p: np.ndarray, t: float, tangential: np.ndarray | None) -> list[tuple[str, np.ndarray]]:
+    """(link, impulse in ground axes) of the constraints with a point of application (a loop's pin, a point on a
+    line or plane, a rolling contact): their multipliers Lambda from the impulse balance M (u+ - u-) = P + A^T
+    Lambda over every constraint row, P the contact impulses in coordinates (least squares: a drive row released
+    for the impact gets 0), mapped to the constrained points as reactions.py maps the forces. A four-bar struck on
+    its rocker: without them, every joint impulse was off by the pin's impulse."""
+    links, impulses, rows = im.loop_items()
+    if not links:
+        return []
+    A = np.atleast_2d(rows(t, q, u_before, p))
+    M = im.M(t, q, u_before, p)
+    P = np.zeros(len(q))
+    J, Jr, normals = im.J(t, q, u_before, p), im.Jr(t, q, u_before, p), im.normals(t, q, u_before, p).ravel()
+    for k in range(len(im.names)):
+        if U[k] == 0 and (tangential is None or not np.any(tangential[k])):
+            continue
+        if im.geometric[k]:  # the impulse on the first point, its opposite on the second: Jr maps their difference
+            impulse = U[k] * normals[3 * k:3 * k + 3] + (tangential[k] if tangential is not None else 0.0)
+            P += Jr[3 * k:3 * k + 3].T @ impulse
+        else:
+            P += J[k] * U[k]
+    lam = np.linalg.lstsq(A.T, M @ (u_after - u_before) - P, rcond=None)[0]
+    values = np.asarray(impulses(t, q, u_before, np.concatenate([p, lam])), dtype=float).reshape(len(links), 3)
+    return list(zip(links, values))
 
 
 def centre_of_percussion(model: MechanicalModel, link: str | None = None) -> dict:
