@@ -785,3 +785,34 @@ def test_constants_that_c99_lacks_are_defined(tmp_path):
     source = write(pkg, "c", tmp_path / "c")
     assert "M_SQRT2" in "".join(p.read_text() for p in Path(source).glob("*.c"))  # what the printer writes
     check_every_target(model, pkg, tmp_path)
+
+
+def _module_of(folder: Path, name: str):
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location(f"{name}_{folder.name}", folder / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_parameters_that_fix_the_exported_structure_are_refused(tmp_path):
+    """A cart on a rail along [1, h, 0] pinned to a cart on x (a user's model): exported at h = 0, the pin's y row
+    vanishes and is left out, so the package at h = 0.3 would let the carts move where the pin locks them
+    (closed form: s1 h / |(1, h)| = 0, so both stand still). `params(h=0.3)` refuses it and the README says why;
+    exported with --set h=0.3, both rows are there and the carts do not accelerate under the push."""
+    from tests.helpers import DATA_DIR
+
+    path = DATA_DIR / "beyond" / "rail_pinned.yaml"
+    flat = _module_of(write(derive_package(mechsys.load(path)), "python", tmp_path / "flat"), "rail")
+    assert flat.CONSTRAINTS == ("pin.x",) and set(flat.FIXED) == {"h"}
+    assert flat.params(h=0.0, F=5.0)["F"] == 5.0
+    with pytest.raises(ValueError, match="h fixes the structure of this export"):
+        flat.params(h=0.3)
+    assert "### Fixed by this export" in (tmp_path / "flat" / "README.md").read_text()
+    sloped = _module_of(write(derive_package(mechsys.load(path, {"h": "0.3"})), "python", tmp_path / "sloped"),
+                        "rail")
+    assert sloped.CONSTRAINTS == ("pin.x", "pin.y") and sloped.FIXED == {}
+    acc, _lam = sloped.accelerations(0.0, [0.0, 0.0], [0.0, 0.0])
+    assert np.allclose(acc, 0.0, atol=1e-12)
+    assert _module_of(write(bundled("double_pendulum")[1], "python", tmp_path / "dp"), "double_pendulum").FIXED == {}

@@ -454,3 +454,22 @@ def test_a_nonholonomic_model_matches_mechsys_simulate(tmp_path):
     stepper = Stepper(build("rolling_disk", tmp_path))
     assert validate_fmu(str(tmp_path / "rolling_disk.fmu")) == []
     assert np.max(np.abs(stepper.run(times) - reference("rolling_disk", times=times))) < MATCH
+
+
+@needs_fmpy
+@needs_gcc
+def test_the_fmu_refuses_a_parameter_that_fixes_its_structure(tmp_path):
+    """Exported at h = 0, a pin's y row vanishes and is left out (tests/data/beyond/rail_pinned.yaml): the FMU
+    takes h = 0 but refuses h = 0.3 with the reason in its log, instead of simulating without the row."""
+    path = tmp_path / "rail.fmu"
+    write_fmu(mechsys.load(ROOT / "tests" / "data" / "beyond" / "rail_pinned.yaml"), path)
+    Stepper(path, {"h": 0.0, "F": 4.0})
+    log = []
+
+    class Logged(Stepper):
+        def _log(self, env, instance, status, category, message) -> None:
+            log.append(message.decode())
+
+    with pytest.raises(Exception, match="fmi2SetReal failed"):
+        Logged(path, {"h": 0.3})
+    assert any("h fixes the structure of this FMU" in text for text in log)

@@ -240,6 +240,11 @@ def _c_array(ctype: str, name: str, values: list[str]) -> str:
     return f"static const {ctype} {name}[{max(1, len(values))}] = {{{', '.join(values) or '0'}}};"
 
 
+def _c_text(text: str) -> str:
+    """A C string literal of plain text (printable ASCII, quotes and backslashes escaped)."""
+    return '"' + "".join(ch if 32 <= ord(ch) < 127 and ch not in '"\\?' else f"\\x{ord(ch):02x}\"\"" for ch in text) + '"'
+
+
 def _c_string(text: str) -> str:
     return '"' + "".join(ch if ch.isalnum() or ch in "_()." else f"\\x{ord(ch):02x}" for ch in text) + '"'
 
@@ -251,6 +256,9 @@ def model_header(layout: FmuLayout, guid: str) -> str:
     n_out = len(layout.outputs)
     settable = ["0" if v.causality == "calculatedParameter" else "1" for v in layout.parameters]
     offsets = [f"offsetof({prefix}_params, {v.name})" for v in layout.parameters]
+    codes = {q.code: q for q in pkg.parameters}
+    exported = [repr(float(codes[v.name].value)) for v in layout.parameters]
+    fixed = [_c_text(pkg.fixed.get(codes[v.name].name, "").replace("`", "")) for v in layout.parameters]
     state_start = [repr(float(v.start)) if v.start is not None else "0.0" for v in layout.states]
     state_settable = ["0" if v.initial == "calculated" else "1" for v in layout.states]
     names = [_c_string(v.name) for v in layout.variables]
@@ -270,6 +278,8 @@ def model_header(layout: FmuLayout, guid: str) -> str:
              f"typedef {prefix}_params msfmu_parameters;", "",
              _c_array("size_t", "msfmu_parameter_offset", offsets),
              _c_array("int", "msfmu_parameter_settable", settable),
+             _c_array("double", "msfmu_parameter_exported", exported),
+             _c_array("char *const", "msfmu_parameter_fixed", fixed),
              _c_array("double", "msfmu_state_start", state_start),
              _c_array("int", "msfmu_state_settable", state_settable),
              _c_array("char *const", "msfmu_variable_name", names)]

@@ -400,6 +400,12 @@ static fmi2Status msfmu_set_parameter(msfmu_instance *c, fmi2ValueReference r, d
                   msfmu_variable_name[r]);
         return fmi2Error;
     }
+    if (msfmu_parameter_fixed[r][0] && value != msfmu_parameter_exported[r]) {
+        msfmu_log(c, fmi2Error, "logStatusError", "fmi2SetReal: %s = %g: %s fixes the structure of this FMU (%s); "
+                  "export again with mechsys codegen --set %s=%g", msfmu_variable_name[r], value,
+                  msfmu_variable_name[r], msfmu_parameter_fixed[r], msfmu_variable_name[r], value);
+        return fmi2Error;
+    }
     if (!(c->mode & (MSFMU_INSTANTIATED | MSFMU_INITIALIZATION | MSFMU_EVENT))) {
         msfmu_log(c, fmi2Error, "logStatusError", "fmi2SetReal: the parameter %s can be set before initialization "
                   "ends and in event mode only", msfmu_variable_name[r]);

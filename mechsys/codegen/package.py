@@ -145,6 +145,9 @@ class Package:
     prescribed: list[tuple[str, str]] = field(default_factory=list)  # (coordinate, expression of t)
     notes: list[str] = field(default_factory=list)
     version: str = ""
+    #: parameter name -> why it fixes the structure of this export (a constraint row or a contact that vanishes
+    #: at its value and was left out): another value needs another export (`--set`)
+    fixed: dict[str, str] = field(default_factory=dict)
 
     @property
     def n(self) -> int:
@@ -297,6 +300,7 @@ def derive_package(model: "MechanicalModel", method: str = "lagrange") -> Packag
     pkg = Package(plain(model.name), prefix, plain(Path(doc.file).name), method, plain(doc.spec.description or ""),
                   coordinates, parameters, rows, {}, inputs, [(n, to_text(e)) for n, e in model.prescribed.items()],
                   _notes(model, moved), __version__)
+    pkg.fixed = fixed_parameters(model)
     n, m = len(model.q), len(rows)
 
     def add(name: str, args: tuple[str, ...], shape: tuple[int, ...], program: Program, summary: str) -> None:
@@ -350,6 +354,32 @@ def derive_package(model: "MechanicalModel", method: str = "lagrange") -> Packag
     add("residual_jacobian", ("t", "q", "u", "a", "lam", "p"), (n + m, 2 * n), Program.part(jac, jac.jacobian, facts),
         "Jacobian d[M q'' - f - A^T lam; A q'' - b]/d[q, q'] at given q'' and lam (exact, symbolic)")
     return pkg
+
+
+def fixed_parameters(model: "MechanicalModel") -> dict[str, str]:
+    """The parameters that fix the structure of an export, and why: those in a constraint row (or a contact's
+    normal velocity, a rolling frame's turning) that vanishes identically at the file's values and was left out
+    (mechanics/build.py's decisions), and the parameters a calculated one among them is computed from. With other
+    values that row may not vanish: the exported code would leave a constraint out, silently (a cart on a rail
+    along [1, h, 0] pinned to a cart on x: exported at h = 0, the pin's y row is gone, and at h = 0.3 the carts
+    moved where the pin locks them)."""
+    names = {s: s.name for s in model.parameter_symbols}
+    exprs = model.doc.parameter_exprs
+    out: dict[str, str] = {}
+    for what, kind, expr, outcome in model.kin.decisions:
+        if kind != "zero" or not outcome:
+            continue
+        found = [names[s] for s in sorted(sp.sympify(expr).free_symbols, key=str) if s in names]
+        stack = list(found)
+        while stack:  # a calculated parameter follows the ones it is computed from
+            name = stack.pop()
+            depends = [str(x) for x in sp.sympify(exprs.get(name, 0)).free_symbols if str(x) in model.parameters]
+            stack += [x for x in depends if x not in found]
+            found += [x for x in depends if x not in found]
+        for name in found:
+            out.setdefault(name, f"`{what}` is identically zero at the exported values, which decides the "
+                                 "exported structure")
+    return out
 
 
 def _expression(value: object) -> str:
@@ -460,6 +490,14 @@ def readme(pkg: Package, target: str, signatures: Sequence[tuple[str, str]], usa
         out.append("| | | | | the model has no parameters |")
     out += ["", "Defaults are the file's values (with `--set` applied). A parameter the file computes from others is "
             "exported as its value: changing one parameter does not update it.", ""]
+    if pkg.fixed:
+        out += ["### Fixed by this export", "",
+                "These parameters decide the structure of the exported equations: at their values a constraint row "
+                "(or a contact) vanishes and is left out. With other values it may not vanish, and the code would "
+                "silently leave it out. Export again with `mechsys codegen --set NAME=VALUE` to change them. The "
+                "Python package's `params()` and the FMU's `fmi2SetReal` refuse another value; C and MATLAB callers "
+                "must keep these values.", ""]
+        out += [f"- `{name}`: {why}" for name, why in pkg.fixed.items()] + [""]
     if pkg.m:
         out += ["## Constraint rows", "", "| row | name | kind |", "|---|---|---|"]
         out += [f"| {i} | `{name}` | {kind} |" for i, (name, kind) in enumerate(pkg.constraints)]
