@@ -100,6 +100,15 @@ def test_bullet_pendulum_file_values():
     close(out["energy_loss"], 0.5 * 0.05 * 300**2 - T_after, what="energy lost")
 
 
+def test_percussion_of_an_unknown_link_names_it():
+    """`--percussion --link nope` says the link is unknown (it said a hinged link was needed)."""
+    from test_cli_hardening import one_line
+
+    r = CliRunner().invoke(app, ["collide", str(BULLET), "--percussion", "--link", "pendulam"])
+    line = one_line(r)
+    assert "--link pendulam: unknown link (did you mean 'pendulum'?)" in line
+
+
 @pytest.mark.parametrize("e, v", [(0.0, 300), (0.2, 300), (0.7, 90), (1.0, 500)])
 def test_centre_of_percussion_no_hinge_impulse(e, v):
     """rC = IO/(m1 rG) = 0.8: U_Ox = 0 for any e and v; `--percussion` reports that distance."""

@@ -125,3 +125,40 @@ def test_an_instant_too_far_for_the_assembly_steps_is_refused(capsys):
     reached = instant(capsys, "--at", repr(t), "--set", f"F4={F4}")
     dT, dV, x4d = _energies(t, w)
     assert reached["driving"]["theta2"] == pytest.approx((dT + dV - F4 * x4d) / w, rel=1e-6)
+
+
+GEARS = """\
+name: gears
+description: two meshing gears, gear 1 driven, a load torque on gear 2 (the mesh as an expression)
+parameters: {r1: 0.05, r2: 0.15, J1: 0.002, J2: 0.03, TL: 1.2}
+coordinates:
+  p1: {prescribed: 3*t + 2*t^2}
+  p2: {initial: 0}
+ground:
+  points: {C2: [0.2, 0, 0]}
+links:
+  gear1:
+    joint: {type: revolute, parent: ground, axis: z, coordinate: p1}
+    inertia: {zz: J1}
+  gear2:
+    joint: {type: revolute, parent: ground, axis: z, coordinate: p2, origin: C2}
+    inertia: {zz: J2}
+constraints:
+  - {type: holonomic, name: mesh, expression: r1*p1 + r2*p2}
+forces:
+  - {type: torque, on: gear2, axis: z, value: -TL}
+"""
+
+
+def test_a_constraint_without_a_point_is_noted_as_simulate_notes_it(capsys, tmp_path):
+    """A gear mesh written as an expression has no point of application: its force is counted inside the joints
+    of its coordinates, and `inverse` says so, as `simulate --reactions` does. The drive torque from the power
+    balance (p2 = -k p1, k = r1/r2): J1 p1'' + J2 k^2 p1'' - TL k with p1'' = 4."""
+    path = tmp_path / "gears.yaml"
+    path.write_text(GEARS)
+    code, out, err = run(capsys, "inverse", str(path), "-f", "json")
+    assert code == 0, err
+    data = json.loads(out)
+    assert any("constraint mesh has no point of application" in n for n in data["notes"])
+    ratio = 0.05 / 0.15
+    assert math.isclose(data["driving"]["p1"], 0.002 * 4 + 0.03 * ratio**2 * 4 - 1.2 * ratio, rel_tol=1e-10)

@@ -487,6 +487,10 @@ def centre_of_percussion(model: MechanicalModel, link: str | None = None) -> dic
     hinged = [j for j in model.kin.joints if j.type == "revolute" and j.parent == "ground"
               and any(b.name == j.link and b.mass != 0 for b in model.kin.bodies)]
     if link is not None:
+        links = [j.link for j in model.kin.joints]
+        if link not in links:
+            raise InputError(f"--link {link}: unknown link{model.doc.suggest(link, links)} "
+                             f"(choose from {', '.join(links)})")
         hinged = [j for j in hinged if j.link == link]
     if len(hinged) != 1:
         raise InputError("--percussion needs exactly one massive link hinged to ground by a revolute joint "

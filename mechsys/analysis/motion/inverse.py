@@ -66,7 +66,7 @@ def inverse_dynamics(model: MechanicalModel, t: float = 0.0) -> Instant:
     with degrees of freedom keep the file's values: the state at t of a motion is `simulate`'s."""
     from mechsys.numeric.parameters import parameter_values
     from mechsys.analysis.motion.outputs import compile_outputs, deferred_values
-    from mechsys.analysis.motion.reactions import wrenches
+    from mechsys.analysis.motion.reactions import reaction_notes, wrenches
     from mechsys.analysis.motion.simulate import RightHandSide, check_on_manifold, compile_model, file_state, project
 
     c = compile_model(model)
@@ -94,5 +94,6 @@ def inverse_dynamics(model: MechanicalModel, t: float = 0.0) -> Instant:
             f"assembled at t = 0 and carried along the constraints to t = {t:g}"
         warnings.append(f"the file's state {how} (the branch nearest the file's values): {', '.join(moved)} "
                         "differ from the file")
+    warnings += reaction_notes(model)  # what the reactions leave inside the joints (as simulate --reactions says)
     return Instant(t, list(model.coordinates), q, u, np.asarray(a, float), driving, multipliers, reactions, outputs,
                    warnings)
