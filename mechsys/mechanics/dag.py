@@ -177,30 +177,43 @@ class Evaluation:
 
     def of(self, expr: sp.Basic) -> Optional[tuple[float, float]]:
         root = sp.sympify(expr)
-        memo = self._memo
-        stack = [root]
-        while stack:  # iterative post-order: a deep product never reaches Python's recursion limit
-            node = stack[-1]
-            if id(node) in memo:
-                stack.pop()
-                continue
-            if self.base is not None and node.args and not self._changed & self.free.mask(node):
-                result = self.base.of(node)
-            elif node.is_Symbol:
-                result = _finite(self.values.get(node))
-            elif node.is_Number or node.is_NumberSymbol:
-                result = _finite(node)
-            else:
-                waiting = [a for a in node.args if id(a) not in memo]
-                if waiting:
-                    stack.extend(waiting)
-                    continue
-                args = [memo[id(a)][1] for a in node.args]
-                result = None if None in args else _apply(node, args)
-            memo[id(node)] = (node, result)
-            stack.pop()
-        return memo[id(root)][1]
+        return _post_order(root, self._memo, self._settle, _combine)
 
+    def _settle(self, node: sp.Basic) -> tuple[bool, Optional[tuple[float, float]]]:
+        """(True, value) of a node known without its arguments (a leaf, or one the shifted symbols leave alone)."""
+        if self.base is not None and node.args and not self._changed & self.free.mask(node):
+            return True, self.base.of(node)
+        if node.is_Symbol:
+            return True, _finite(self.values.get(node))
+        if node.is_Number or node.is_NumberSymbol:
+            return True, _finite(node)
+        return False, None
+
+
+def _combine(node: sp.Basic, args: list) -> Optional[tuple[float, float]]:
+    return None if None in args else _apply(node, args)
+
+
+def _post_order(root: sp.Basic, memo: dict, settle, combine):
+    """memo[id(node)] = (node, value) for root and what it needs, without recursion (a deep product never reaches
+    Python's recursion limit), each shared node once: ``settle(node)`` gives (True, value) where a node needs no
+    arguments, else ``combine(node, values of its arguments)``."""
+    stack = [root]
+    while stack:
+        node = stack[-1]
+        if id(node) in memo:
+            stack.pop()
+            continue
+        done, result = settle(node)
+        if not done:
+            waiting = [a for a in node.args if id(a) not in memo]
+            if waiting:
+                stack.extend(waiting)
+                continue
+            result = combine(node, [memo[id(a)][1] for a in node.args])
+        memo[id(node)] = (node, result)
+        stack.pop()
+    return memo[id(root)][1]
 
 #: the functions Points evaluates, by sympy type (numpy's, elementwise)
 _NUMPY = {sp.sin: np.sin, sp.cos: np.cos, sp.tan: np.tan, sp.asin: np.arcsin, sp.acos: np.arccos,
@@ -220,30 +233,19 @@ class Points:
         self._memo: dict[int, tuple[sp.Basic, Optional[np.ndarray]]] = {}
 
     def of(self, expr: sp.Basic) -> Optional[np.ndarray]:
-        root = sp.sympify(expr)
-        memo = self._memo
-        stack = [root]
         with np.errstate(all="ignore"):
-            while stack:  # iterative post-order, like Evaluation
-                node = stack[-1]
-                if id(node) in memo:
-                    stack.pop()
-                    continue
-                if node.is_Symbol:
-                    result = self.values.get(node)
-                elif node.is_Number or node.is_NumberSymbol:
-                    result = _number(node)
-                else:
-                    waiting = [a for a in node.args if id(a) not in memo]
-                    if waiting:
-                        stack.extend(waiting)
-                        continue
-                    args = [memo[id(a)][1] for a in node.args]
-                    result = None if any(a is None for a in args) else _apply_arrays(node, args)
-                memo[id(node)] = (node, result)
-                stack.pop()
-        return memo[id(root)][1]
+            return _post_order(sp.sympify(expr), self._memo, self._settle, _combine_arrays)
 
+    def _settle(self, node: sp.Basic) -> tuple[bool, Optional[np.ndarray]]:
+        if node.is_Symbol:
+            return True, self.values.get(node)
+        if node.is_Number or node.is_NumberSymbol:
+            return True, _number(node)
+        return False, None
+
+
+def _combine_arrays(node: sp.Basic, args: list) -> Optional[np.ndarray]:
+    return None if any(a is None for a in args) else _apply_arrays(node, args)
 
 def _number(node: sp.Basic) -> Optional[float]:
     try:
