@@ -434,3 +434,18 @@ def test_review_compares_with_all_kept_motions_at_once_as_pair_by_pair(name):
         else:
             hits += 1
     assert hits >= 4 and len(kept) >= 8  # full turns are the same motion; a changed spin rate is not
+
+
+def test_a_force_naming_the_angles_is_not_re_charted(tmp_path):
+    """A sleeping zxz top with a righting potential written in its own angles, kp*(1 - cos(theta)): read in another
+    sequence it is another function (1 - cos of the x angle alone penalises tilt about one axis only), so the steady
+    motions at the lock (theta = 0 and pi) were classified with the wrong physics ('stable', classified in zxy).
+    They are now 'undecided' at the coordinate singularity, naming the force."""
+    text = (ROOT / "tests" / "data" / "beyond" / "top_zxz.yaml").read_text()
+    text += "  - {type: potential, value: 0.3*(1 - cos(theta))}\n"
+    out = _json("equilibria", _write(tmp_path, "top.yaml", text))
+    locked = [e for e in out["equilibria"] if abs(math.sin(e["coordinates"]["theta"])) < 1e-9]
+    assert len(locked) == 2
+    for e in locked:
+        assert e["stability"] == "undecided"
+        assert "forces[1].value names theta, which another sequence of the joint would change" in e["reason"]

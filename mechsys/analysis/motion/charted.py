@@ -88,6 +88,18 @@ def watched(model: MechanicalModel) -> list[tuple]:
     return memo
 
 
+def _kept(model: MechanicalModel, joints: list[tuple]) -> str | None:
+    """Why the run must stay in the file's angles (None: it may switch charts): the equations have explicit time,
+    or a force or constraint names the watched angles (equilibrium/charts.named_angles: another sequence would
+    change it)."""
+    from mechsys.analysis.equilibrium.charts import named_angles
+
+    named = named_angles(model, [model.coordinates[i] for _l, _k, _s, idx in joints for i in idx])
+    if named:
+        return f"{named}, which another sequence of the joint would change"
+    return None if _autonomous(model) else "the equations have explicit time"
+
+
 def _autonomous(model: MechanicalModel) -> bool:
     """No explicit time in the equations of motion. Without constraints they come from T, V and the generalized
     forces alone, so t absent from those three decides it in milliseconds; otherwise ``model.is_autonomous``
@@ -333,17 +345,16 @@ def _note_undefined(undefined: list, opts: ChartOptions) -> list[str]:
     return notes
 
 
-def _unswitched(result: SimulationResult, joints: list[tuple], opts: ChartOptions) -> SimulationResult:
-    """A run kept in the file's angles (the model has explicit time), with a warning when they came near a gimbal
+def _unswitched(result: SimulationResult, joints: list[tuple], opts: ChartOptions, why: str) -> SimulationResult:
+    """A run kept in the file's angles (``why``: _kept's reason), with a warning when they came near a gimbal
     lock."""
     ratios = [min(ratio_at(seq, frame(seq, q[idx])[0]) for _l, _k, seq, idx in joints) for q in result.q]
     k = int(np.argmin(ratios))
     if ratios[k] < opts.switch:
         result.warnings.append(
             f"no chart switching: the rotation angles come within a conditioning ratio of {ratios[k]:.2g} of gimbal "
-            f"lock at t = {result.t[k]:.6g} s, where their rates grow like 1/ratio and accuracy suffers; re-charting "
-            f"needs a model without explicit time (or write the joint with a sequence whose singular set the motion "
-            f"avoids)")
+            f"lock at t = {result.t[k]:.6g} s, where their rates grow like 1/ratio and accuracy suffers; it is not "
+            f"re-charted because {why} (write the joint with a sequence whose singular set the motion avoids)")
     return result
 
 
@@ -403,15 +414,16 @@ def simulate_charted(model: MechanicalModel, run_options: SimulationOptions, ove
             first = run(model, t_end, dt, 0.0, options.first_steps)
             kind = _first_change(joints, charts, first.t, first.q, first.u, options)[1]
         except AnalysisError:
-            if not _autonomous(model):  # today's run, with the whole budget (and its message if it fails)
+            if _kept(model, joints):  # today's run, with the whole budget (and its message if it fails)
                 return integrate(model, run_options, overrides_p, progress)
             first, kind = None, "failed"
         if kind == "":
             return first
-        if not _autonomous(model):
-            return _unswitched(first, joints, options)
-    elif not _autonomous(model):
-        return _unswitched(integrate(model, run_options, overrides_p, progress), joints, options)
+        if _kept(model, joints):
+            return _unswitched(first, joints, options, _kept(model, joints))
+    elif _kept(model, joints):
+        return _unswitched(integrate(model, run_options, overrides_p, progress), joints, options,
+                           _kept(model, joints))
     else:
         first, kind = None, "start"
     if first is not None:  # keep the good rows of the first run and go on from the last of them
