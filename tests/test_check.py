@@ -294,3 +294,15 @@ def test_a_value_written_as_a_closed_form_in_the_parameters_is_evaluated(tmp_pat
     assert "= -0.09899924966" in results["x(1) = x0 cos(sqrt(k/m))"]["message"]
     assert float(results["with k = 8 set, x(1) = x0 cos(2)"]["measured"]) == pytest.approx(0.1 * math.cos(2), abs=1e-8)
     assert "unknown name 'omega'" in results["an unknown name is an error"]["message"]
+
+
+@pytest.mark.parametrize("kw, text", [
+    ({"tolerance": 1e-3}, "y = 1.0 ± 0.001"),
+    ({"rel_tolerance": 1e-3}, "y = 1.0 ± 0.001 (relative)"),
+    ({"tolerance": 1e-12, "rel_tolerance": 1e-3}, "y = 1.0 ± max(1e-12, 0.001 relative)"),  # the larger applies
+])
+def test_the_expected_text_shows_the_tolerance_that_applies(kw, text):
+    """With both tolerances the text showed only the absolute one (± 1e-12) beside a pass by 3e-4."""
+    from mechsys.analysis.batch.check import _expected_text
+
+    assert _expected_text(expectation(output="y", value=1.0, **kw)) == text

@@ -200,3 +200,12 @@ def test_the_summary_says_which_event_stopped_the_run_and_when(fmt, monkeypatch)
     else:
         assert "stopped by event" in result.output and "ground" in result.output
         assert f"{t_ground:.6f}" in result.output
+
+
+def test_native_with_events_is_an_option_conflict():
+    """`--method native` on a model with events is an input error (exit 2, one line), like other option
+    conflicts; it exited 1, as if the analysis had failed."""
+    from test_cli_hardening import invoke, one_line
+
+    line = one_line(invoke("simulate", FALL, "--method", "native", "--t-end", "0.1"), code=2)
+    assert "--method native: events need scipy's event location; use DOP853" in line

@@ -121,6 +121,9 @@ def _expected_text(e: dict) -> str:
 
 
 def _tol(e: dict) -> str:
+    """The tolerance as _close applies it: the larger of the absolute and the relative one."""
+    if e.get("tolerance") and e.get("rel_tolerance"):
+        return f" ± max({e['tolerance']}, {e['rel_tolerance']} relative)"
     if e.get("tolerance"):
         return f" ± {e['tolerance']}"
     if e.get("rel_tolerance"):

@@ -700,17 +700,17 @@ def native_integrator(model: MechanicalModel, c: Compiled, required: bool) -> Na
     with ``required`` (--method native) a reason is raised instead of returning None."""
     from mechsys.numeric import native
 
-    why = None
+    why, conflict = None, True  # conflict: the option does not fit the model (an input error, exit 2)
     if c.gap_names:
         why = "contacts need the impact event loop"
     elif model.events:
         why = "events need scipy's event location"
     elif native.compiler() is None:
-        why = "no C compiler is available (set CC) or MECHSYS_NATIVE=off"
+        why, conflict = "no C compiler is available (set CC) or MECHSYS_NATIVE=off", False
     if why is not None:
         native.abandon(model)
         if required:
-            raise AnalysisError(f"--method native: {why}; use DOP853")
+            raise (InputError if conflict else AnalysisError)(f"--method native: {why}; use DOP853")
         return None
     if getattr(c, "native", None) is None:  # kept with the compiled code, which with_overrides clones share
         c.native = native.load(model)
