@@ -1092,8 +1092,9 @@ def sweep(
                                           f"{'s' if summary.workers != 1 else ''})"),
                              ("wall time [s]", round(summary.seconds, 3)), ("output", summary.output or "stdout")):
             t.add(label, value)
-        t.notes += summary.errors
-        rendered = render_tables([t], fmt.value, {**summary.to_dict(), "errors": summary.errors})
+        t.notes += summary.notes() + summary.errors
+        payload = {**summary.to_dict(), "notes": summary.notes(), "errors": summary.errors}
+        rendered = render_tables([t], fmt.value, payload)
         if isinstance(rendered, str):  # the summary goes to stderr when the table takes stdout
             (sys.stdout if output is not None else sys.stderr).write(rendered)
         else:

@@ -78,14 +78,20 @@ def _modes(model: MechanicalModel, options: dict) -> Outputs:
 def _simulate(model: MechanicalModel, options: dict) -> Outputs:
     from mechsys.analysis.motion.charted import simulate_charted
     from mechsys.analysis.motion.outputs import add_outputs
-    from mechsys.analysis.motion.simulate import SimulationOptions
+    from mechsys.analysis.motion.simulate import SimulationOptions, file_state
 
     run = SimulationOptions(float(options.get("t_end", 10.0)), options.get("dt"), options.get("method", "auto"))
     r = add_outputs(model, simulate_charted(model, run))
+    q0, u0 = file_state(model)
     out: Outputs = {"t_end": float(r.t[-1]), "energy_drift": r.energy_drift,
                     "energy_balance": r.energy_balance_error, "impacts": len(r.impacts),
                     "max_residual": float(np.max(r.residual)), "rhs_evaluations": r.rhs_evaluations,
-                    "events": len(r.events)}
+                    "events": len(r.events),
+                    # how far the assembly onto the constraints moved the start from the task's values
+                    "start_moved": float(np.max(np.abs(np.concatenate([r.q[0] - q0, r.u[0] - u0])), initial=0.0))}
+    if model.kin.constraints:  # where the run started: a swept start value off the constraints is moved
+        for k, c in enumerate(r.coordinates):
+            out[f"start.{c}"], out[f"start.der({c})"] = float(r.q[0, k]), float(r.u[0, k])
     for k, c in enumerate(r.coordinates):
         out[f"final.{c}"] = float(r.q[-1, k])
         out[f"final.der({c})"] = float(r.u[-1, k])
