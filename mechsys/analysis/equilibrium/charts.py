@@ -80,30 +80,43 @@ def singularities(model: MechanicalModel, coordinates: dict[str, float], p: np.n
 
 # ----------------------------------------------------------------------------------------- re-charting
 _NAME = re.compile(r"[A-Za-z_][A-Za-z_0-9]*")
-#: fields of forces and constraints that hold expressions of the file
-_EXPRESSION_FIELDS = ("value", "stiffness", "free_length", "coefficient", "free_angle", "acceleration", "expression")
+#: keys whose values are names or choices, not expressions of the file (a joint's own coordinates among them)
+_NOT_EXPRESSIONS = frozenset({"type", "parent", "sequence", "name", "description", "coordinates", "units"})
 
 
 def named_angles(model: MechanicalModel, angles: list[str]) -> str | None:
-    """The first force or constraint of the file that names one of ``angles`` (in an expression, der() included, or
-    as the coordinate it acts on), described; None when none does. Another sequence of the joint gives those names
-    other angles, so re-charting would change that force: a top's spin damping written
-    -b*(der(psi)*cos(theta) + der(phi)) in zxz angles, read in zyx angles, turned 0.57 off in its rotation matrix
-    within 2 s while the energy balance held to 1e-11. Kinematic quantities (positions, velocities, springs between
-    points) are derived again in the other sequence and are not affected."""
+    """Where the file names one of ``angles`` outside the joints' own coordinate lists (a force's or a constraint's
+    expression, der() included, the coordinate a force acts on, a link's geometry), as a path; None when it does
+    not. Another sequence of the joint gives those names other angles, so re-charting would change what they
+    define: a top's spin damping written -b*(der(psi)*cos(theta) + der(phi)) in zxz angles, read in zyx angles,
+    turned 0.57 off in its rotation matrix within 2 s while the energy balance held to 1e-11. What the kinematics
+    derive from the joints (positions, velocities, springs between points) is derived again in the other sequence
+    and is not affected; outputs are evaluated in the file's angles."""
     wanted = set(angles)
-    spec = model.doc.spec
-    for section, items in (("forces", spec.forces), ("constraints", spec.constraints)):
-        for i, item in enumerate(items):
-            if getattr(item, "coordinate", None) in wanted:
-                return f"{section}[{i}] acts on the coordinate {item.coordinate}"
-            for key in _EXPRESSION_FIELDS:
-                value = getattr(item, key, None)
-                texts = value if isinstance(value, list) else [value]
-                for text in texts:
-                    hit = sorted(wanted & set(_NAME.findall(str(text)))) if text is not None else []
-                    if hit:
-                        return f"{section}[{i}].{key} names {hit[0]}"
+    raw = model.doc.raw if isinstance(model.doc.raw, dict) else {}
+
+    def walk(node, path: str) -> str | None:
+        if isinstance(node, dict):
+            for key, value in node.items():
+                if key not in _NOT_EXPRESSIONS:
+                    found = walk(value, f"{path}.{key}")
+                    if found:
+                        return found
+        elif isinstance(node, list):
+            for k, value in enumerate(node):
+                found = walk(value, f"{path}[{k}]")
+                if found:
+                    return found
+        elif isinstance(node, str):
+            hit = sorted(wanted & set(_NAME.findall(node)))
+            if hit:
+                return f"{path} names {hit[0]}"
+        return None
+
+    for section in ("forces", "constraints", "links", "ground"):
+        found = walk(raw.get(section), section)
+        if found:
+            return found
     return None
 
 
