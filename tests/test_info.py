@@ -284,3 +284,38 @@ def test_points_evaluates_as_compiled_code_at_every_point():
     assert out[0] == 2.0 + 64.0 and np.isnan(out[1])
     assert Points({x: np.array([1.0])}).of(sp.Piecewise((x, x > 0), (0, True))) is None
     assert Points({}).of(x + 1) is None
+
+
+BALANCE = """\
+name: watch_balance
+description: a watch's balance wheel and its lever, each on a hairspring
+parameters: {Ib: 1.2e-10, kh: 5e-6, ml: 2e-6, ll: 3e-3}
+coordinates: {phi: {initial: 0.5}, psi: {}}
+links:
+  balance:
+    joint: {type: revolute, parent: ground, axis: z, coordinate: phi}
+    inertia: {zz: Ib}
+  lever:
+    joint: {type: revolute, parent: ground, axis: z, coordinate: psi, origin: [0.01, 0, 0]}
+    mass: ml
+    center_of_mass: [ll, 0, 0]
+forces:
+  - {type: torsional_spring, coordinate: phi, stiffness: kh}
+  - {type: torsional_spring, coordinate: psi, stiffness: kh}
+"""
+
+
+def test_facts_of_small_si_models_are_relative_to_their_own_scale(tmp_path, monkeypatch):
+    """A watch balance (M = diag(1.2e-10, 1.8e-11) kg m^2, positive definite) was said to have a singular mass
+    matrix, and a four-bar scaled to micrometres and nanograms had every coordinate 'massless' and a constraint
+    rank of 0 (3 DOF): thresholds had a floor of 1 under the matrices' scale. Grubler: the balance has 2 DOF, the
+    four-bar 1 (rank 2), as at metre scale."""
+    monkeypatch.setenv("MECHSYS_CACHE", "off")
+    path = tmp_path / "balance.yaml"
+    path.write_text(BALANCE)
+    info = system_info(mechsys.load(path))
+    assert info.dof == 2 and not info.massless_coordinates and not info.notes
+    scaled = {"l1": 0.4e-6, "l2": 0.1e-6, "l3": 0.35e-6, "l4": 0.3e-6, "m2": 0.5e-9, "m3": 1.2e-9, "m4": 0.8e-9}
+    micro = mechsys.load(ROOT / "systems" / "four_bar.yaml", {k: str(v) for k, v in scaled.items()})
+    info = system_info(micro)
+    assert (info.constraint_rank, info.dof, info.massless_coordinates) == (2, 1, [])

@@ -14,10 +14,13 @@ from mechsys.numeric.runtime import matrix_from_source
 
 
 def _rank(matrix: np.ndarray) -> int:
+    """The numerical rank, relative to the matrix's own scale: a watch's balance wheel (I = 1.2e-10 kg m^2) or a
+    MEMS linkage (lengths of 100 um) has entries far below 1, and a floor of 1 under the scale made its mass matrix
+    singular and its loop's constraint rank 0."""
     if matrix.size == 0:
         return 0
     s = np.linalg.svd(matrix, compute_uv=False)
-    return int(np.sum(s > 1e-9 * max(1.0, s[0])))
+    return int(np.sum(s > 1e-9 * s[0])) if s[0] > 0 else 0
 
 
 def _matrices(model: MechanicalModel):
@@ -135,8 +138,8 @@ def system_info(model: MechanicalModel) -> Info:
         if not all(np.all(np.isfinite(M)) for M in Ms):
             raise AnalysisError("the mass matrix is not finite at sample states (an overflow or a division by zero: "
                                 "check the parameter values, e.g. a mass of 1e200 squared)")
-        massless = [c for i, c in enumerate(model.coordinates)
-                    if all(abs(M[i, i]) <= 1e-12 * max(1.0, float(np.max(np.abs(M)))) for M in Ms)]
+        massless = [c for i, c in enumerate(model.coordinates)  # relative to M's own scale, as _rank
+                    if all(abs(M[i, i]) <= 1e-12 * float(np.max(np.abs(M))) for M in Ms)]
         if _rank(Ms[0]) < nfree:
             notes.append("the mass matrix is singular (massless coordinates need condensation or constraints)")
     dof_formula = mobility - len(prescribed)
