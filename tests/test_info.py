@@ -319,3 +319,31 @@ def test_facts_of_small_si_models_are_relative_to_their_own_scale(tmp_path, monk
     micro = mechsys.load(ROOT / "systems" / "four_bar.yaml", {k: str(v) for k, v in scaled.items()})
     info = system_info(micro)
     assert (info.constraint_rank, info.dof, info.massless_coordinates) == (2, 1, [])
+
+
+def test_a_prescribed_coordinate_used_only_in_a_force_is_no_joint_freedom(tmp_path, monkeypatch):
+    """A pendulum pushed by a generalized force u = A sin(w t), u written as a prescribed coordinate: no joint uses
+    u, so the DOF formula subtracts nothing (MO = 1, DOF 1, as with the torque written in t) and the kinematics hold
+    no time (scleronomic). It gave 'DOF by formula 0', rheonomic, and a note blaming dependent constraints."""
+    monkeypatch.setenv("MECHSYS_CACHE", "off")
+    path = tmp_path / "pushed.yaml"
+    path.write_text("""\
+name: pushed
+parameters: {m: 1, l: 1, g: 9.81, A: 0.2, w: 3}
+coordinates:
+  theta: {initial: 0.1}
+  u: {prescribed: A*sin(w*t)}
+links:
+  rod:
+    joint: {type: revolute, parent: ground, axis: z, coordinate: theta}
+    mass: m
+    center_of_mass: [0, -l, 0]
+forces:
+  - {type: gravity, acceleration: [0, -g, 0]}
+  - {type: generalized_force, coordinate: theta, value: u}
+""")
+    info = system_info(mechsys.load(path))
+    assert (info.mobility, info.prescribed, info.dof_formula, info.dof, info.rheonomic) == (1, [], 1, 1, False)
+    assert not info.notes
+    driven = mechsys.load(ROOT / "systems" / "gyrostabilizer.yaml")  # a joint uses its prescribed spin: L counts it
+    assert system_info(driven).prescribed and system_info(driven).rheonomic

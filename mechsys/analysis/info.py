@@ -112,7 +112,9 @@ def system_info(model: MechanicalModel) -> Info:
     constraint_rows = [{"type": t, "equations": n} for t, n in kin.constraint_elements]
     n = len(joints)
     mobility = 6 * n - sum(6 - min(j.joint_class, 6) for j in joints) - sum(c["equations"] for c in constraint_rows)
-    prescribed = list(model.prescribed)
+    # L of the DOF formula: the prescribed coordinates that joints use (one used only in a force, or to move a
+    # joint's origin, adds no joint freedom to subtract; yaml-reference: coordinates)
+    prescribed = [c for c in model.prescribed if any(c in j.coordinates for j in kin.joints)]
     params = model.parameter_symbols
     p = [model.parameters[s.name] for s in params]
     states = random_states(model, 3, seed=7)  # M (massless coordinates) at configurations in general position

@@ -415,8 +415,8 @@ class MechanicalModel:
 
     @cached_property
     def is_rheonomic(self) -> bool:
-        if self.doc.prescribed:
-            return True
+        """Time in the kinematics: a frame's pose or a constraint row (a prescribed coordinate used only in a force
+        leaves them alone: scleronomic, non-autonomous)."""
         exprs = [f.origin for f in self.kin.frames.values()] + [f.R for f in self.kin.frames.values()]
         exprs += [c.velocity for c in self.kin.constraints]
         return any(self.t in sp.sympify(e).free_symbols for e in exprs)
