@@ -188,3 +188,32 @@ def test_latex_and_markdown_define_the_names_they_use(fmt):
         assert all(int(j) < int(k) for j in re.findall(r"z_\{(\d+)\}", body)), k
     used = {int(j) for j in re.findall(r"z_\{(\d+)\}", head + "".join(b for _, b in definitions))}
     assert used == set(range(1, len(definitions) + 1))
+
+
+def test_simplified_equations_read_back_in_the_model_language(tmp_path):
+    """`derive --simplify` of a cart on a spring to a wall (its length |x + 1|): sympy's simplify writes the
+    spring's force as Piecewise(..., Eq(x, -1)), which the model language does not have. Such an entry is printed
+    as derived, so every printed expression reads back (and has the values of the plain derivation)."""
+    path = tmp_path / "cart.yaml"
+    path.write_text("""\
+name: cart_on_a_spring
+parameters: {M: 3, k: 200, c: 0.5}
+coordinates: {x: {initial: 0.2}}
+ground:
+  points: {wall: [-1, 0, 0]}
+links:
+  cart:
+    joint: {type: prismatic, parent: ground, axis: x, coordinate: x}
+    mass: M
+forces:
+  - {type: spring, between: [cart, ground.wall], stiffness: k, free_length: 0.5}
+  - {type: damper, between: [cart, ground.wall], coefficient: c}
+""")
+    r = run_cli("derive", path, "--simplify", "-f", "json")
+    assert r.returncode == 0, r.stderr_text
+    data = json.loads(r.stdout)
+    assert "Piecewise" not in r.stdout
+    model = mechsys.load(path)
+    M, f = _numbers(data, model, np.array([0.2]), np.array([0.7]))
+    # closed form: M x'' = -k (x + 1 - 0.5) - c x' for x > -1
+    assert np.allclose(M, [[3.0]]) and np.allclose(f, [-200 * 0.7 - 0.5 * 0.7], rtol=1e-12)

@@ -22,10 +22,21 @@ Where = list[tuple[str, str]]  # (name, text) of each named subexpression, in th
 
 
 def simplified(eq: Equations) -> Equations:
-    """A copy with every entry passed through sympy.simplify (opt-in, slow)."""
-    s = sp.simplify
+    """A copy with every entry passed through sympy.simplify (opt-in, slow). An entry that simplify writes with a
+    kind of node the derived one does not have (Piecewise(..., Eq(x, -1)) from a spring's |x + 1|) is kept as
+    derived: the printed equations stay in the model language, which reads them back."""
+    def s(expr: sp.Expr) -> sp.Expr:
+        out = sp.simplify(expr)
+        return out if _kinds(out) <= _kinds(expr) else expr
+
     return Equations(eq.method, eq.coordinates, eq.q, eq.u, eq.a, eq.M.applyfunc(s), eq.f.applyfunc(s),
                      eq.Q.applyfunc(s), s(eq.T), s(eq.V), eq.A.applyfunc(s), eq.b.applyfunc(s), eq.constraint_names)
+
+
+def _kinds(expr: sp.Expr) -> set[type]:
+    """The kinds of node in ``expr`` besides symbols, numbers, sums, products and powers."""
+    plain = (sp.Symbol, sp.Number, sp.Add, sp.Mul, sp.Pow)
+    return {type(x) for x in sp.preorder_traversal(expr) if not isinstance(x, plain)}
 
 
 def _paren(text: str, times: str) -> str:
