@@ -217,3 +217,17 @@ forces:
     M, f = _numbers(data, model, np.array([0.2]), np.array([0.7]))
     # closed form: M x'' = -k (x + 1 - 0.5) - c x' for x > -1
     assert np.allclose(M, [[3.0]]) and np.allclose(f, [-200 * 0.7 - 0.5 * 0.7], rtol=1e-12)
+
+
+def test_multipliers_take_a_name_no_parameter_has(tmp_path):
+    """A four-bar whose coupler mass is called lambda1: the multipliers were printed lambda1, lambda2 beside the
+    mass lambda1 (and \\lambda_{1} in LaTeX for both). They are then called mu1, mu2; without the clash, lambda."""
+    text = (SYSTEMS_DIR / "four_bar.yaml").read_text().split("expect:")[0]
+    path = tmp_path / "four_bar_lambda.yaml"
+    path.write_text(re.sub(r"\bm3\b", "lambda1", text))
+    out = run_cli("derive", path).stdout
+    assert "M q'' = f + A^T mu" in out and "  mu1 [" in out and "  mu2 [" in out and "lambda1*" in out
+    latex = run_cli("derive", path, "-f", "latex").stdout
+    assert "\\mu_{1}" in latex
+    plain = run_cli("derive", SYSTEMS_DIR / "four_bar.yaml").stdout
+    assert "M q'' = f + A^T lambda" in plain and "  lambda1 [" in plain

@@ -39,6 +39,24 @@ def _kinds(expr: sp.Expr) -> set[type]:
     return {type(x) for x in sp.preorder_traversal(expr) if not isinstance(x, plain)}
 
 
+#: names of the multipliers, text and LaTeX, in order of preference
+_MULTIPLIERS = (("lambda", "\\lambda"), ("mu", "\\mu"), ("multiplier", "\\Lambda"))
+
+
+def _multiplier_names(eq: Equations) -> tuple[str, str]:
+    """(text, LaTeX) stem of the multipliers' names, lambda1 and lambda_{1} unless a name of the model would
+    print the same (a parameter called lambda1 or lambda_1 beside the multiplier lambda1)."""
+    if not eq.A.shape[0]:
+        return _MULTIPLIERS[0]
+    from mechsys.mechanics.dag import FreeSymbols
+
+    names = {str(x) for x in FreeSymbols().of_all([*eq.M, *eq.f, *eq.A, *eq.b, *eq.Q, eq.T, eq.V])}
+    for text, latex in _MULTIPLIERS:
+        if not any(re.fullmatch(f"{text}_?\\d+", n) for n in names):
+            return text, latex
+    return _MULTIPLIERS[-1]
+
+
 def _paren(text: str, times: str) -> str:
     return f"({text})" if times != " " else f"\\left({text}\\right)"
 
@@ -132,7 +150,8 @@ def _text_constraint_row(eq: Equations, k: int, tidy: bool) -> str:
 
 def render_text(eq: Equations, name: str, tidy: bool = False, where: Where = ()) -> str:
     """The text form; tidy: signs joined as 'a - b' (never 'a + -b'), unit coefficients left out."""
-    lines = [f"{name}: equations of motion ({eq.method}), M q'' = f" + (" + A^T lambda" if eq.A.shape[0] else "")]
+    text_name = _multiplier_names(eq)[0]
+    lines = [f"{name}: equations of motion ({eq.method}), M q'' = f" + (f" + A^T {text_name}" if eq.A.shape[0] else "")]
     lines.append("coordinates: " + (", ".join(eq.coordinates) or "(none)"))
     lines.append(f"T = {to_text(eq.T)}")
     lines.append(f"V = {to_text(eq.V)}")
@@ -142,12 +161,12 @@ def render_text(eq: Equations, name: str, tidy: bool = False, where: Where = ())
     lines.append("equations:")
     for i, c in enumerate(eq.coordinates):
         lhs = _lhs(eq, i, to_text, "*", lambda j: f"der(der({eq.coordinates[j]}))", tidy)
-        lam = _multiplier_terms(eq, i, to_text, lambda k: f"lambda{k + 1}", "*", tidy)
+        lam = _multiplier_terms(eq, i, to_text, lambda k: f"{text_name}{k + 1}", "*", tidy)
         lines.append(f"  {c}: {lhs} = {_rhs(eq.f[i], to_text, lam)}")
     if eq.A.shape[0]:
         lines.append("constraints (acceleration level, A q'' = b):")
         for k, cname in enumerate(eq.constraint_names):
-            lines.append(f"  lambda{k + 1} [{cname}]: {_text_constraint_row(eq, k, tidy)} = {to_text(eq.b[k])}")
+            lines.append(f"  {text_name}{k + 1} [{cname}]: {_text_constraint_row(eq, k, tidy)} = {to_text(eq.b[k])}")
     if where:
         lines.append("where (subexpressions that several entries share, each printed once):")
         lines += [f"  {z} = {text}" for z, text in where]
@@ -166,10 +185,11 @@ def latex_equations(eq: Equations, tidy: bool = False) -> list[tuple[str, str]]:
     in LaTeX with dotted rates: the rows of ``derive -f latex`` after T, V and Q (tidy: signs as in
     render_text)."""
     acc = {j: to_latex(a) for j, a in enumerate(eq.a)}
+    stem = _multiplier_names(eq)[1]
     rows = []
     for i, c in enumerate(eq.coordinates):
         lhs = _lhs(eq, i, to_latex, " ", lambda j: acc[j], tidy)
-        lam = _multiplier_terms(eq, i, to_latex, lambda k: f"\\lambda_{{{k + 1}}}", " ", tidy)
+        lam = _multiplier_terms(eq, i, to_latex, lambda k: f"{stem}_{{{k + 1}}}", " ", tidy)
         rows.append((c, f"{lhs} &= {_rhs(eq.f[i], to_latex, lam)}"))
     for k in range(eq.A.shape[0]):
         if tidy:
