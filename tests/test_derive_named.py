@@ -231,3 +231,24 @@ def test_multipliers_take_a_name_no_parameter_has(tmp_path):
     assert "\\mu_{1}" in latex
     plain = run_cli("derive", SYSTEMS_DIR / "four_bar.yaml").stdout
     assert "M q'' = f + A^T lambda" in plain and "  lambda1 [" in plain
+
+
+def test_a_name_ending_in_dot_is_not_printed_as_a_rate(tmp_path):
+    """A damping parameter called thetadot: sympy's LaTeX writes it \\dot{\\theta}, the rate der(theta)'s, so
+    thetadot*der(theta) read as a square. It is printed upright as written; the rate keeps its dot."""
+    path = tmp_path / "pendulum.yaml"
+    path.write_text("""\
+name: damped
+parameters: {m: 1, l: 1, g: 9.81, thetadot: 0.3}
+coordinates: {theta: {initial: 0.1}}
+links:
+  rod:
+    joint: {type: revolute, parent: ground, axis: z, coordinate: theta}
+    mass: m
+    center_of_mass: [0, -l, 0]
+forces:
+  - {type: gravity, acceleration: [0, -g, 0]}
+  - {type: generalized_force, coordinate: theta, value: -thetadot*der(theta)}
+""")
+    latex = run_cli("derive", path, "-f", "latex").stdout
+    assert "\\dot{\\theta} \\mathrm{thetadot}" in latex and "\\dot{\\theta} \\dot{\\theta}" not in latex

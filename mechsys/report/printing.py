@@ -293,7 +293,7 @@ class _DottedLatexPrinter(_PrintsEachNodeOnce, LatexPrinter):
 
     def _print_Symbol(self, expr: sp.Symbol, style: str = "plain") -> str:
         dotted = _dotted(expr.name)
-        return dotted if dotted is not None else super()._print_Symbol(expr, style)
+        return dotted if dotted is not None else _undotted(expr.name, super()._print_Symbol(expr, style))
 
     def _name(self, name: str) -> str:
         return _latex_name(name)
@@ -351,7 +351,15 @@ def definition_latex(expr: sp.Basic) -> str:
 
 
 def _latex_name(name: str) -> str:
-    return sp.latex(sp.Symbol(name))
+    return _undotted(name, sp.latex(sp.Symbol(name)))
+
+
+def _undotted(name: str, tex: str) -> str:
+    """``tex``, sympy's LaTeX of a model name, unless sympy turned a suffix into a dot (thetadot, xddot): then the
+    name upright as written, since \\dot{\\theta} is der(theta)'s (thetadot*der(theta) read as a square)."""
+    if "\\dot{" in tex or "\\ddot{" in tex:
+        return "\\mathrm{" + name.replace("_", "\\_") + "}"
+    return tex
 
 
 def _dotted(name: str) -> str | None:
