@@ -347,3 +347,19 @@ forces:
     assert not info.notes
     driven = mechsys.load(ROOT / "systems" / "gyrostabilizer.yaml")  # a joint uses its prescribed spin: L counts it
     assert system_info(driven).prescribed and system_info(driven).rheonomic
+
+
+def test_the_cyclic_decision_does_not_depend_on_the_units_scale(monkeypatch):
+    """A spatial RSSR linkage (a user's model) in metres and scaled to 1e-10 m: the same facts. Scaled, the shift
+    test compared differences of 1e-13 against an absolute 1e-9 and called the rocker angle q4 cyclic, although
+    shifting it opens the loop. Only the coupler's idle spin s3 is cyclic at both scales (proven symbolically)."""
+    monkeypatch.setenv("MECHSYS_CACHE", "off")
+    path = ROOT / "tests" / "data" / "beyond" / "rssr_linkage.yaml"
+    lengths = {"a": 0.1, "b": 0.5, "c": 0.3, "d": 0.45, "e": 0.15}
+    metres = mechsys.load(path)
+    tiny = mechsys.load(path, {k: str(v * 1e-9) for k, v in lengths.items()})
+    for model in (metres, tiny):
+        decision = model.cyclic_decision
+        assert (decision.names, decision.basis) == (["s3"], {"s3": "symbolic"})
+        info = system_info(model)
+        assert (info.constraint_rank, info.dof, info.massless_coordinates) == (3, 2, ["s3", "q4"])

@@ -180,8 +180,10 @@ class _Shifts:
             for a, b in pairs:
                 if not (np.all(np.isfinite(a)) and np.all(np.isfinite(b))):
                     return False  # a singular state: do not claim a symmetry from it
-                scale = max(1.0, float(np.max(np.abs(a))), float(np.max(np.abs(b))))
-                if np.max(np.abs(a - b)) > ROUND_OFF * scale:
+                # relative to the part's own values: a floor of 1 let a linkage in nanometres (entries of 1e-13)
+                # pass any shift, and called its rocker angle cyclic
+                scale = max(float(np.max(np.abs(a), initial=0.0)), float(np.max(np.abs(b), initial=0.0)))
+                if np.max(np.abs(a - b), initial=0.0) > ROUND_OFF * scale:
                     return False
         return True
 
