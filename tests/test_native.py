@@ -17,7 +17,7 @@ from scipy.integrate import solve_ivp
 import mechsys
 from mechsys.numeric.parameters import parameter_values
 from mechsys.analysis.motion.simulate import RightHandSide, compile_model, initial_state, simulate
-from mechsys.errors import AnalysisError
+from mechsys.errors import AnalysisError, InputError
 from mechsys.numeric import native
 from tests.helpers import DATA_DIR, ROOT, SYSTEMS_DIR, load_data, load_system
 
@@ -100,9 +100,10 @@ def test_auto_keeps_the_compiled_loop_where_lasting_oscillations_must_be_followe
 
 
 def test_native_refuses_contacts_and_events_with_a_reason():
-    with pytest.raises(AnalysisError, match="contacts"):
+    """An option that does not fit the model: an input error (exit 2), not a failed analysis."""
+    with pytest.raises(InputError, match="contacts"):
         simulate(load_system("bouncing_ball"), 1.0, method="native")
-    with pytest.raises(AnalysisError, match="events"):
+    with pytest.raises(InputError, match="events"):
         simulate(load_data("falling_events"), 1.0, method="native")
 
 
