@@ -1,6 +1,6 @@
 """mechanics/dag.value: an expression DAG in machine floating point, each shared node once. Checked against
-sympy's evalf on random expressions, and through the builder's value-dependent decisions (mechanics/build.py
-_identically_zero), which must come out as with sympy's Floats on every bundled model."""
+sympy's evalf on random expressions, and through the builder's value-dependent decisions (dag.identically_zero),
+which must come out as with sympy's evalf on every bundled model; dag.precise at 30 digits against evalf."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -10,8 +10,8 @@ import pytest
 import sympy as sp
 
 import mechsys
-from mechsys.mechanics import build
-from mechsys.mechanics.dag import Evaluation, value
+from mechsys.mechanics import dag
+from mechsys.mechanics.dag import Evaluation, identically_zero, precise, value
 
 ROOT = Path(__file__).resolve().parents[1]
 x, y, z = sp.symbols("x y z", real=True)
@@ -88,5 +88,36 @@ def test_the_builders_decisions_are_sympys(name, monkeypatch):
     monkeypatch.setenv("MECHSYS_CACHE", "off")
     path = ROOT / "systems" / f"{name}.yaml"
     fast = [d[3] for d in mechsys.load(path).kin.decisions]
-    monkeypatch.setattr(build, "dag_value", lambda expr, values: None)  # sympy's Floats only
+    monkeypatch.setattr(dag, "precise", lambda expr, values, digits: None)  # sympy's evalf only
     assert [d[3] for d in mechsys.load(path).kin.decisions] == fast
+
+
+def test_precise_equals_evalf_at_its_digits():
+    """dag.precise at 30 digits: |evalf(30)| of random expressions to 25 digits (or None where evalf leaves the
+    reals or the rules)."""
+    rng = np.random.default_rng(31)
+    compared = 0
+    for _ in range(40):
+        e = _draw(rng, 4)
+        e = e * e + e
+        point = dict(zip((x, y, z), rng.uniform(-1.5, 1.5, 3)))
+        got = precise(e, point, 30)
+        if got is None:
+            continue
+        want = abs(complex(e.evalf(30, subs={s: sp.Float(v, 30) for s, v in point.items()})))
+        assert got == pytest.approx(want, rel=1e-13, abs=1e-25)
+        compared += 1
+    assert compared > 30
+
+
+@pytest.mark.parametrize("scale", [1e-12, 1.0, 1e12])
+def test_identically_zero_is_scale_free(scale):
+    """Round-off is zero and a value is not, at any scale: L (cos^2 + sin^2 - 1) vanishes identically and L sin(x)
+    does not, for L from 1e-12 to 1e12 (absolute thresholds called a 1e-12 m linkage's rows zero, and the
+    identity's round-off at 1e12 a value)."""
+    L = sp.Symbol("L", positive=True)
+    values = {L: scale}
+    assert identically_zero(L * (sp.cos(x) ** 2 + sp.sin(x) ** 2 - 1), values)
+    assert identically_zero(L * (sp.cos(x + y) - sp.cos(x) * sp.cos(y) + sp.sin(x) * sp.sin(y)), values)
+    assert not identically_zero(L * sp.sin(x), values)
+    assert not identically_zero(L * (sp.cos(x) ** 2 + sp.sin(x) ** 2 - 1) + L * 1e-9 * x, values)

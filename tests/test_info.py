@@ -321,6 +321,30 @@ def test_facts_of_small_si_models_are_relative_to_their_own_scale(tmp_path, monk
     assert (info.constraint_rank, info.dof, info.massless_coordinates) == (2, 1, [])
 
 
+def test_a_picometre_four_bar_keeps_its_loop(monkeypatch):
+    """The four-bar with its bars scaled to picometres was refused: 'this constraint references no coordinate (it
+    is identically satisfied)', its loop rows (1e-12 m) taken for round-off by absolute thresholds. Dimensional
+    analysis: the loop keeps rank 2 and 1 DOF, and the mass matrix at the same angles scales with s^2 (masses
+    kept)."""
+    import numpy as np
+
+    monkeypatch.setenv("MECHSYS_CACHE", "off")
+    s = 1e-12
+    lengths = {"l1": 0.4, "l2": 0.1, "l3": 0.35, "l4": 0.3}
+    path = ROOT / "systems" / "four_bar.yaml"
+    big, small = mechsys.load(path), mechsys.load(path, {k: repr(v * s) for k, v in lengths.items()})
+    info = system_info(small)
+    assert (info.constraint_rank, info.dof, info.massless_coordinates) == (2, 1, [])
+    angles = {q: v for q, v in zip(big.q, (0.7, 0.4, 2.1))}
+
+    def mass_matrix(model):
+        values = {p: model.parameters[p.name] for p in model.parameter_symbols}
+        M = model.equations("kane").M.subs(angles).subs(values)
+        return np.array(M.evalf(), dtype=float)
+
+    assert np.allclose(mass_matrix(small) / s ** 2, mass_matrix(big), rtol=1e-12, atol=0)
+
+
 def test_a_prescribed_coordinate_used_only_in_a_force_is_no_joint_freedom(tmp_path, monkeypatch):
     """A pendulum pushed by a generalized force u = A sin(w t), u written as a prescribed coordinate: no joint uses
     u, so the DOF formula subtracts nothing (MO = 1, DOF 1, as with the torque written in t) and the kinematics hold

@@ -7,7 +7,7 @@ from typing import Any
 
 import sympy as sp
 
-from mechsys.mechanics.dag import value as dag_value
+from mechsys.mechanics.dag import identically_zero
 from mechsys.mechanics.differentiate import Differentiator
 from mechsys.mechanics.kinematics import AXES, FrameState, unit
 from mechsys.model.expressions import names_in
@@ -655,7 +655,7 @@ def decide(kind: str, expr: Any, values: dict) -> bool:
     "near_x" (the direction component ``expr`` is at least 0.9, so x is no helper axis)."""
     if kind == "near_x":
         return abs(float(sp.sympify(expr).subs(values))) >= 0.9
-    return _identically_zero(expr, values)
+    return identically_zero(expr, values)
 
 
 def decisions_hold(kin: Kinematics, values: dict) -> bool:
@@ -665,31 +665,3 @@ def decisions_hold(kin: Kinematics, values: dict) -> bool:
         return all(decide(kind, expr, values) == outcome for _what, kind, expr, outcome in kin.decisions)
     except (TypeError, ValueError, ZeroDivisionError):
         return False
-
-
-def _identically_zero(expr: sp.Expr, values: dict) -> bool:
-    """True when ``expr`` vanishes structurally, or at several random states (then it is identically 0)."""
-    expr = sp.sympify(expr)
-    if expr == 0:
-        return True
-    import random
-
-    rng = random.Random(1234)
-    symbols = sorted(expr.free_symbols, key=str)
-    for _ in range(4):
-        subs = {s: values.get(s, rng.uniform(-1.3, 1.7)) for s in symbols}
-        try:
-            # machine precision first (dag.value, each shared node once): a value far from 0 settles it; a small
-            # one is re-evaluated with evalf's adaptive precision (cancellation)
-            rough = dag_value(expr, subs)
-            if rough is None:  # outside the floats' reach: sympy's Floats
-                rough = expr.xreplace({s: sp.Float(v) for s, v in subs.items()})
-                rough = complex(rough) if rough.is_Number else 0.0
-            if abs(rough) > 1e-6:
-                return False
-            val = complex(expr.evalf(subs=subs))
-        except (TypeError, ValueError):
-            return False
-        if abs(val) > 1e-12:
-            return False
-    return True

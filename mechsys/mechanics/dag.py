@@ -7,7 +7,7 @@ again per coordinate, walked the trees dozens of times (the cyclic-coordinate de
 from __future__ import annotations
 
 import math
-from typing import Iterable, Mapping, Optional
+from typing import Any, Iterable, Mapping, Optional
 
 import numpy as np
 import sympy as sp
@@ -214,6 +214,99 @@ def _post_order(root: sp.Basic, memo: dict, settle, combine):
         memo[id(node)] = (node, result)
         stack.pop()
     return memo[id(root)][1]
+
+#: the functions ``precise`` evaluates, by sympy type (mpmath's, at the working precision)
+_MPMATH = {sp.sin: "sin", sp.cos: "cos", sp.tan: "tan", sp.asin: "asin", sp.acos: "acos", sp.atan: "atan",
+           sp.sinh: "sinh", sp.cosh: "cosh", sp.tanh: "tanh", sp.exp: "exp", sp.log: "log", sp.Abs: "fabs",
+           sp.sign: "sign"}
+
+
+def precise(expr: sp.Basic, values: Mapping[sp.Symbol, float], digits: int) -> Optional[float]:
+    """|``expr``| with ``values`` for its symbols, every step in mpmath at ``digits`` significant digits, each shared
+    node once: the same expression at two precisions tells a value from round-off without a scale (an identically
+    zero row of a micrometre linkage is 1e-30 of its terms at 30 digits and 1e-60 at 60; a nonzero one keeps its
+    value). None when a symbol has no value or a node is outside sums, products, powers, numbers and elementary
+    functions (the caller then asks sympy)."""
+    import mpmath
+
+    ctx = mpmath.mp.clone()
+    ctx.dps = digits
+    prec = ctx.prec
+
+    def settle(node: sp.Basic) -> tuple[bool, Any]:
+        if node.is_Symbol:
+            v = values.get(node)
+            return True, None if v is None else ctx.mpf(v)
+        if node.is_Number or node.is_NumberSymbol:
+            try:
+                return True, ctx.mpmathify(node._to_mpmath(prec))
+            except (TypeError, ValueError, AttributeError):
+                return True, None
+        return False, None
+
+    def combine(node: sp.Basic, args: list) -> Any:
+        if any(a is None for a in args):
+            return None
+        try:
+            if node.is_Add:
+                return ctx.fsum(args)
+            if node.is_Mul:
+                return ctx.fprod(args)
+            if node.is_Pow:
+                base, exp = args
+                return base ** (int(exp) if node.exp.is_Integer else exp)
+            if type(node) is sp.atan2:
+                return ctx.atan2(*args)
+            if type(node) in _MPMATH and len(args) == 1:
+                return getattr(ctx, _MPMATH[type(node)])(args[0])
+        except (ValueError, ZeroDivisionError, OverflowError, TypeError):
+            return None
+        return None
+
+    out = _post_order(sp.sympify(expr), {}, settle, combine)
+    if out is None:
+        return None
+    try:
+        return float(abs(out)) if ctx.isfinite(out) else None
+    except (TypeError, ValueError):
+        return None
+
+
+def identically_zero(expr: sp.Expr, values: dict) -> bool:
+    """True when ``expr`` vanishes structurally, or at several random states (then it is identically 0). Scale-free:
+    a value beyond the round-off of its largest term settles "not zero"; a smaller one is computed at 30 and at 60
+    digits, and only round-off (which shrinks with the precision) counts as zero, whatever the units (a linkage of
+    1e-12 m has rows of 1e-12 that are not zero; a model in grams and millimetres has zero rows of 1e-9)."""
+    expr = sp.sympify(expr)
+    if expr == 0:
+        return True
+    import random
+
+    rng = random.Random(1234)
+    symbols = sorted(expr.free_symbols, key=str)
+    for _ in range(4):
+        subs = {s: values.get(s, rng.uniform(-1.3, 1.7)) for s in symbols}
+        rough = Evaluation(subs).of(expr)  # machine precision, each shared node once
+        if rough is not None and abs(rough[0]) > 1e-8 * rough[1]:
+            return False
+        low, high = (_at_digits(expr, subs, digits) for digits in (30, 60))
+        if low is None or high is None:
+            return False
+        if high != 0 and abs(low - high) <= 1e-6 * high:
+            return False  # the same value at both precisions: not round-off
+    return True
+
+
+def _at_digits(expr: sp.Expr, subs: dict, digits: int) -> float | None:
+    """|expr| at ``digits`` significant digits (dag.precise, else sympy's evalf); None outside the complex numbers."""
+    out = precise(expr, subs, digits)
+    if out is not None:
+        return out
+    try:
+        return abs(complex(expr.evalf(digits, subs={s: sp.Float(v, digits) for s, v in subs.items()})))
+    except (TypeError, ValueError):
+        return None
+
 
 #: the functions Points evaluates, by sympy type (numpy's, elementwise)
 _NUMPY = {sp.sin: np.sin, sp.cos: np.cos, sp.tan: np.tan, sp.asin: np.arcsin, sp.acos: np.arccos,
