@@ -159,3 +159,23 @@ def test_rests_at_a_change_point_are_undecided_and_modes_refuses_them(tmp_path):
     result = runner.invoke(app, ["modes", str(path)])
     assert result.exit_code != 0
     assert "singular configuration of the closed loops" in result.stderr and "Traceback" not in result.output
+
+
+@pytest.mark.parametrize("units", ["mems", "picometre"])
+def test_the_parallelogram_has_the_same_two_rests_at_any_scale(units):
+    """The same parallelogram with a third bar at MEMS scale (bars of 50 um, 1e-9 kg) listed a 'locked' rest at
+    theta2 = -0.84, held by multipliers of 3e5 N on the rounding of its redundant loop row, and called the
+    equilibria 'not isolated'; at picometre scale (1e-12 m) it listed 12 'locked' rests and refused the loop's
+    rows as identically satisfied before that. Thresholds were absolute (a floor of 1 under N m and m). Its rests
+    are the same two at every scale, with omega^2 = 5 g / (4 a)."""
+    a, sets = {"mems": (0.5e-4, ["--set", "a=0.5e-4", "--set", "L=1e-4", "--set", "m=1e-9"]),
+               "picometre": (0.5e-12, ["--set", "a=0.5e-12", "--set", "L=1e-12"])}[units]
+    data = _run("equilibria", str(BEYOND / "parallelogram_third_bar.yaml"), *sets)
+    omega = math.sqrt(5 * 9.81 / (4 * a))
+    rests = sorted(data["equilibria"], key=lambda e: e["coordinates"]["theta2"])
+    assert [round(e["coordinates"]["theta2"], 9) for e in rests] == [round(-math.pi / 2, 9), round(math.pi / 2, 9)]
+    hanging, upright = rests
+    assert hanging["stability"] == "stable" and upright["stability"] == "unstable"
+    assert sorted(abs(im) for _, im in hanging["eigenvalues"]) == pytest.approx([omega, omega], rel=1e-9)
+    assert sorted(re for re, _ in upright["eigenvalues"]) == pytest.approx([-omega, omega], rel=1e-9)
+    assert "not isolated" not in data["message"]

@@ -11,10 +11,10 @@ import sympy as sp
 
 from mechsys.analysis.equilibrium import loops
 from mechsys.errors import AnalysisError, InputError
-from mechsys.mechanics.dag import Substitution
+from mechsys.mechanics.dag import Substitution, identically_zero
 from mechsys.mechanics.model import INTERNAL_METHOD, MechanicalModel
 from mechsys.numeric import cache
-from mechsys.numeric.lambdify import compile_exprs, generate_source
+from mechsys.numeric.lambdify import generate_source
 from mechsys.numeric.runtime import function_from_source
 from mechsys.numeric.parameters import parameter_values
 
@@ -112,6 +112,9 @@ class EquilibriumProblem:
     """The algebraic equations of rest: f(q, u) + A^T lambda = 0 and Phi(q) = 0, with u = 0 except the steady
     rates of cyclic coordinates, which are unknowns (or fixed at their initial rate when the system leaves
     them free: a family of steady motions)."""
+
+    #: rows in residual_exprs' layout, each coordinate's then the constraints' (equation_scales measures each)
+    scaled_rows = True
 
     def __init__(self, model: MechanicalModel) -> None:
         self.model = model
@@ -211,17 +214,12 @@ class EquilibriumProblem:
         key = ("family", tuple(self.cyclic))
         if key not in store:
             F = Substitution(self.rest_substitution).matrix(self.eq.f)
-            # what F can depend on at rest besides the parameters (F.free_symbols walked the shared tree: 20 s)
-            syms = [self._q(c) for c in self.free] + [self._u(c) for c in self.cyclic]
-            store[key] = ([F[self.model.coordinates.index(c)] == 0 for c in self.cyclic], len(syms),
-                          compile_exprs(list(F), syms + self.model.parameter_symbols) if syms else None)
-        zero, size, fn = store[key]
-        rng = np.random.default_rng(2)
-        p = list(parameter_values(self.model))
-        for c, vanishes in zip(self.cyclic, zero):
-            i = self.model.coordinates.index(c)
-            if vanishes or (fn is not None and all(
-                    abs(fn(*rng.uniform(-2, 2, size), *p)[i]) < 1e-12 for _ in range(4))):
+            store[key] = [F[self.model.coordinates.index(c)] for c in self.cyclic]
+        values = dict(zip(self.model.parameter_symbols, parameter_values(self.model)))
+        for c, row in zip(self.cyclic, store[key]):
+            # at random states, relative to the row's own terms (dag.identically_zero): an absolute 1e-12 took a
+            # watch-sized rotor's torque for none
+            if identically_zero(row, values):
                 fixed[c] = self.model.doc.initial_rate[c]
         return fixed
 
@@ -528,12 +526,15 @@ def _wrap(d: np.ndarray) -> np.ndarray:
 def _polish(problem: EquilibriumProblem, z: np.ndarray, p: np.ndarray) -> np.ndarray | None:
     """Plain Newton to full accuracy, then accept only a genuine zero of F; entries within rounding of 0 are set
     to 0 where that is a root as well (Newton's last step leaves -2.35e-38 where the root is at 0)."""
+    rows, sizes = equation_scales(problem, p)
     for _ in range(8):
         F = problem.F(z, p)
         J = problem.J(z, p)
         if not (np.all(np.isfinite(F)) and np.all(np.isfinite(J))):
             return None
-        step = np.linalg.lstsq(J, -F, rcond=None)[0]
+        # in the equations' and unknowns' own sizes: least squares weighs a MEMS loop's 1e-12 N m force rows
+        # as its 1e-4 m loop rows, and its rank cut sees the redundant rows' rounding as rounding
+        step = sizes * np.linalg.lstsq(J / rows[:, None] * sizes, -F / rows, rcond=None)[0]
         z = z + step
         if np.linalg.norm(step, np.inf) < 1e-14 * (1 + np.linalg.norm(z, np.inf)):
             break
@@ -545,12 +546,16 @@ def _polish(problem: EquilibriumProblem, z: np.ndarray, p: np.ndarray) -> np.nda
 
 def _is_root(problem: EquilibriumProblem, z: np.ndarray, p: np.ndarray) -> bool:
     """F(z) vanishes to 1e-10 of the Jacobian's largest entry (at least 1), and Newton's step from z is below 1e-4
-    (1 + |z|): the acceptance of every root. The step test drops the zeros at infinity of a force that only tends
-    to 0 (1/x at x = 1e20: F = 1e-20 passed, but Newton's step there doubles x). An F above rounding (1e-13 of
-    that scale) must also be one Newton's linear model can reduce: near a loop's dead point the multipliers reach
-    1e4 and J's scale with them, and Newton stalls at |F| ~ 1e-7 where J is singular, in no root's basin."""
-    F = problem.F(z, p)
-    J = problem.J(z, p)
+    (1 + |z|): the acceptance of every root. A row or an unknown smaller than 1 where the search looks is measured
+    in its own size (equation_scales): a MEMS linkage's rest equations are 1e-12 N m and its multipliers 1e-8 N,
+    and against a floor of 1 N m every configuration on its loop passed F = 0. The step test drops the zeros at infinity of a force
+    that only tends to 0 (1/x at x = 1e20: F = 1e-20 passed, but Newton's step there doubles x). An F above
+    rounding (1e-13 of that scale) must also be one Newton's linear model can reduce: near a loop's dead point the
+    multipliers reach 1e4 and J's scale with them, and Newton stalls at |F| ~ 1e-7 where J is singular, in no
+    root's basin."""
+    rows, sizes = (np.minimum(s, 1.0) for s in equation_scales(problem, p))  # (never looser than at unit size)
+    F = problem.F(z, p) / rows
+    J = problem.J(z, p) / rows[:, None] * sizes  # in the unknowns' own sizes
     scale = max(1.0, float(np.max(np.abs(J)))) if J.size else 1.0
     if not (np.all(np.isfinite(F)) and np.all(np.isfinite(J)) and np.max(np.abs(F), initial=0.0) <= 1e-10 * scale):
         return False
@@ -559,7 +564,50 @@ def _is_root(problem: EquilibriumProblem, z: np.ndarray, p: np.ndarray) -> bool:
     step = np.linalg.lstsq(J, -F, rcond=None)[0]
     if np.max(np.abs(F)) > 1e-13 * scale and np.linalg.norm(F + J @ step) > 0.25 * np.linalg.norm(F):
         return False  # above rounding, and no step reduces F: a minimum of |F| where J is singular, not a zero
+    step = step * sizes
     return bool(np.max(np.abs(step), initial=0.0) <= 1e-4 * (1 + float(np.max(np.abs(z), initial=0.0))))
+
+
+def equation_scales(problem: EquilibriumProblem, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(rows, sizes): the size of each unknown and of each rest equation's terms where the search looks, medians
+    over the file's initial state and four random starts of the default boxes, each as the search starts it (on
+    the constraints, rates solved, multipliers guessed; a start near a loop's dead point has huge multipliers).
+    An unknown's size is its |z_j| (an angle's at least 1, 1 where it is 0), a row's the largest of |F_i| and
+    |dF_i/dz_j| times the sizes (the largest row's for a fixed-rate cyclic coordinate's row, which vanishes at
+    rest; 1 when a row vanishes at every start). Remembered per parameter values. A problem whose rows are not
+    laid out as residual_exprs (scaled_rows False) gets single ones, which leave F and J as they are."""
+    if not problem.scaled_rows:
+        return np.ones(1), np.ones(1)  # (broadcast: F and J as they are)
+    memo = problem.__dict__.setdefault("_equation_scales", {})
+    key = np.asarray(p, dtype=float).tobytes()
+    if key not in memo:
+        rng = np.random.default_rng(3)
+        boxes = _boxes(problem, None)
+        initial = [problem.model.doc.initial.get(c, 0.0) for c in problem.free] + [
+            problem.model.doc.initial_rate.get(c, 0.0) for c in problem.rate_unknowns]
+        draws = [np.array(initial, dtype=float)] + [np.array([rng.uniform(lo, hi) for lo, hi in boxes])
+                                                      for _ in range(4)]
+        samples = []
+        for draw in draws:
+            try:
+                z = problem.start(draw, p)
+                F, J = problem.F(z, p), problem.J(z, p)
+            except (ValueError, ArithmeticError, np.linalg.LinAlgError):
+                continue
+            if np.all(np.isfinite(F)) and np.all(np.isfinite(J)):
+                samples.append((z, F, J))
+        size, sizes = np.zeros(problem.residual_count), np.ones(len(problem.unknowns))
+        if samples:
+            sizes = np.median([np.abs(z) for z, _, _ in samples], axis=0)
+            sizes = np.where(problem.is_angle(), np.maximum(sizes, 1.0), np.where(sizes > 0, sizes, 1.0))
+            size = np.median([np.maximum(np.abs(F), np.max(np.abs(J) * sizes, axis=1, initial=0.0))
+                              for _z, F, J in samples], axis=0)
+        # the rows that vanish at rest whatever the state (a cyclic coordinate's whose rate is fixed: at rounding
+        # of terms of any size) are measured against the largest row
+        for c in problem.fixed_rates:
+            size[problem.model.coordinates.index(c)] = float(np.max(size, initial=0.0))
+        memo[key] = np.where(size > 0, size, 1.0), sizes
+    return memo[key]
 
 
 def settle(problem: EquilibriumProblem, z: np.ndarray, p: np.ndarray, max_steps: int = 400) -> np.ndarray | None:
@@ -778,9 +826,7 @@ def _stored_search(problem: EquilibriumProblem, p: np.ndarray, disk: str | None)
         for z in roots:
             if z.shape != (len(problem.unknowns),) or not np.all(np.isfinite(z)):
                 return None
-            F, J = problem.F(z, p), problem.J(z, p)
-            if not (np.all(np.isfinite(F)) and np.all(np.isfinite(J))) or \
-                    np.max(np.abs(F), initial=0.0) > 1e-10 * max(1.0, float(np.max(np.abs(J), initial=0.0))):
+            if not _is_root(problem, z, p):
                 return None
     except (KeyError, TypeError, ValueError, ArithmeticError):
         return None
@@ -853,7 +899,7 @@ def singular_note(problem: EquilibriumProblem, dropped: dict[str, list[np.ndarra
     for why, zs in dropped.items():
         where = ", ".join(f"{c} = {wrap(v) if problem.angles.get(c, False) else v:.6g}"
                           for c, v in zip(problem.free, zs[0]))
-        if why == loops.UNBALANCED:
+        if why in (loops.UNBALANCED, loops.ROUNDING):
             notes.append(f"{len(zs)} root(s) where {why} (e.g. {where}) are not rests: the multipliers grow without "
                          f"bound there and F vanishes only to their rounding; not {what}")
             continue

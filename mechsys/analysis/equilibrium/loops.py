@@ -11,6 +11,9 @@ if TYPE_CHECKING:
 #: why a root near a singular configuration of the constraints is not a rest (unbalanced)
 UNBALANCED = ("the closed loops are at or near a singular configuration (a change point, where their constraints lose "
               "rank) and the forces have a part along the motion they lose there")
+#: why a root at a regular configuration of redundant loop rows is not a rest (unbalanced)
+ROUNDING = ("the forces have a part along the motion the closed loops allow, held only by the rounding of their "
+            "redundant constraint rows")
 #: why a rest at a singular configuration gets no verdict (branch_point)
 BRANCHES = ("at a singular configuration of the closed loops (their constraint Jacobian has rank {here} here, "
             "{generic} elsewhere: assembly branches meet): the linearization does not decide")
@@ -49,7 +52,7 @@ def onto_constraints(problem: EquilibriumProblem, start: np.ndarray, p: np.ndarr
         A = problem.J(z, p)[-m:, :nq]
         if not (np.all(np.isfinite(phi)) and np.all(np.isfinite(A))):
             return start
-        if np.max(np.abs(phi)) <= 1e-12 * max(1.0, float(np.max(np.abs(A)))):
+        if np.max(np.abs(phi)) <= 1e-12 * float(np.max(np.abs(A))):  # A: a length per radian (no floor: any units)
             return q
         q[:nq] = q[:nq] + np.linalg.lstsq(A, -phi, rcond=None)[0]
     return start
@@ -88,10 +91,10 @@ def _scale(f: np.ndarray, dfdq: np.ndarray) -> float:
     return max(float(np.max(np.abs(f), initial=0.0)), float(np.max(np.abs(dfdq), initial=0.0)), 1e-300)
 
 
-def _lost(problem: EquilibriumProblem, z: np.ndarray, p: np.ndarray) -> tuple[int, float] | None:
-    """(A's rank at z counting singular values above NEAR, the largest part of the forces along the directions
-    below it relative to _scale) where that rank is below generic_rank; None at regular points of the branch, for
-    problems without holonomic loops and where a value is not finite."""
+def _imbalance(problem: EquilibriumProblem, z: np.ndarray, p: np.ndarray) -> tuple[int, int, float] | None:
+    """(A's rank at z counting singular values above NEAR, its generic_rank, the largest part of the forces along
+    the directions beyond the smaller of the two, relative to _scale); None for problems without holonomic loops
+    and where a value is not finite. At a rest the forces have no part along the motions the constraints allow."""
     if not problem.m or not problem.model.is_holonomic:
         return None
     f, dfdq, A = _pieces(problem, z, p)
@@ -99,27 +102,30 @@ def _lost(problem: EquilibriumProblem, z: np.ndarray, p: np.ndarray) -> tuple[in
         return None
     _, sv, Vt = np.linalg.svd(A)
     here = int(np.count_nonzero(sv > NEAR * sv[0])) if sv.size and sv[0] > 0 else 0
-    if here >= generic_rank(problem, p):
-        return None
-    return here, float(np.max(np.abs(Vt[here:] @ f), initial=0.0)) / _scale(f, dfdq)
+    generic = generic_rank(problem, p)
+    return here, generic, float(np.max(np.abs(Vt[min(here, generic):] @ f), initial=0.0)) / _scale(f, dfdq)
 
 
 def unbalanced(problem: EquilibriumProblem, z: np.ndarray, p: np.ndarray) -> str | None:
-    """UNBALANCED where z is not a rest although F(z) vanishes to rounding, else None: A has (nearly) lost rank at
-    its configuration and the forces have a part along a direction A no longer sees. Near such a configuration
-    (a parallelogram's change point) f + A^T lambda = 0 is met only as lambda grows without bound: Newton creeps
-    towards it and stops where the multipliers' terms (1e4 to 1e15) leave F at their rounding (a parallelogram
-    with a third bar: 48 such roots at its change points, listed as 'locked' rests). A rest there needs f
-    orthogonal to those directions, to BALANCE."""
-    lost = _lost(problem, z, p)
-    return UNBALANCED if lost is not None and lost[1] > BALANCE else None
+    """Why z is not a rest although F(z) vanishes to rounding, else None: the forces have a part along a
+    direction the constraints do not see (to BALANCE). UNBALANCED where A has (nearly) lost rank at its
+    configuration: near such a configuration (a parallelogram's change point) f + A^T lambda = 0 is met only as
+    lambda grows without bound: Newton creeps towards it and stops where the multipliers' terms (1e4 to 1e15) leave
+    F at their rounding (a parallelogram with a third bar: 48 such roots at its change points, listed as 'locked'
+    rests). ROUNDING at a regular configuration of redundant rows: the rounding of their dependent row is a direction
+    the multipliers can grow along (the same parallelogram at MEMS scale, 1e-4 m and 1e-9 kg, had a 'locked' rest
+    at theta2 = -0.84 held by multipliers of 3e5 N)."""
+    out = _imbalance(problem, z, p)
+    if out is None or out[2] <= BALANCE:
+        return None
+    return UNBALANCED if out[0] < out[1] else ROUNDING
 
 
 def branch_point(problem: EquilibriumProblem, z: np.ndarray, p: np.ndarray) -> str | None:
     """Why a rest (unbalanced is None) gets no verdict: A has lost rank at it (BRANCHES), or None. The tangent
     space there is not the mechanism's: the linearization sees two crossing branches, or none."""
-    lost = _lost(problem, z, p)
-    return None if lost is None else BRANCHES.format(here=lost[0], generic=generic_rank(problem, p))
+    out = _imbalance(problem, z, p)
+    return None if out is None or out[0] >= out[1] else BRANCHES.format(here=out[0], generic=out[1])
 
 
 def merge_branch_points(problem: EquilibriumProblem, roots: list[np.ndarray], p: np.ndarray) -> list[np.ndarray]:

@@ -394,6 +394,9 @@ class NonholonomicProblem(EquilibriumProblem):
     """The augmented steady-motion equations (see the module docstring) with the interface of EquilibriumProblem
     (multistart, continuation and sweeps use it unchanged)."""
 
+    #: its rows (dynamics, velocity constraints, accelerations) are taken as they are (equation_scales: ones)
+    scaled_rows = False
+
     def __init__(self, model: MechanicalModel, given: list[str] | None = None, solve: list[str] | None = None,
                  independent: list[str] | None = None, method: str = "kane") -> None:
         self.model = model

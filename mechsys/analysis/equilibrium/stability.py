@@ -9,6 +9,7 @@ import scipy.linalg as sla
 import sympy as sp
 
 from mechsys.analysis.equilibrium.linearize import pieces, state_at
+from mechsys.mechanics.dag import identically_zero
 from mechsys.numeric.lambdify import compile_exprs
 
 if TYPE_CHECKING:
@@ -62,37 +63,65 @@ def pencil_eigenvalues(problem: EquilibriumProblem, e: Equilibrium) -> np.ndarra
     nonholonomic linearization computes those of its deflated Jacobian) gives them without a second eigensolve."""
     if hasattr(problem, "pencil_eigenvalues"):
         return problem.pencil_eigenvalues(e)
-    A, B, _ = reduced_pencil(problem, e)
-    return eigen(A, B)[0]
+    A, B, N = reduced_pencil(problem, e)
+    return eigen(A, B, pencil_positions(problem, N))[0]
 
 
-def eigen(A: np.ndarray, B: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
-    """Finite eigenvalues of the pencil (massless coordinates give infinite ones, dropped) and the Jacobian."""
+def eigen(A: np.ndarray, B: np.ndarray, positions: int) -> tuple[np.ndarray, np.ndarray | None]:
+    """Finite eigenvalues of the pencil (massless coordinates give infinite ones, dropped) and the Jacobian. Whether
+    B is singular is judged on the balanced pencil (a picometre linkage's M ~ 1e-24 beside the identity's 1s is
+    regular), and its QZ eigenvalues are the balanced ones scaled back."""
+    Ab, Bb, w = _balanced(A, B, positions)
     try:
-        J = np.linalg.solve(B, A)
-        if np.linalg.cond(B) > 1e12:
+        if np.linalg.cond(Bb) > 1e12:
             raise np.linalg.LinAlgError
+        J = np.linalg.solve(B, A)
         vals = np.linalg.eigvals(J)
     except np.linalg.LinAlgError:
         J = None
-        vals = sla.eigvals(A, B)
-        vals = vals[np.isfinite(vals)]
+        vals = sla.eigvals(Ab, Bb)
+        vals = w * vals[np.isfinite(vals)]
     order = np.lexsort((vals.imag, vals.real))
     return vals[order], J
 
 
-def singular_pencil(A: np.ndarray, B: np.ndarray) -> bool:
+def pencil_positions(problem: EquilibriumProblem, N: np.ndarray | None) -> int:
+    """The number of position rows (q' = u) of reduced_pencil's (A, B), given its N."""
+    return N.shape[1] if N is not None else len(problem.free)
+
+
+def singular_pencil(A: np.ndarray, B: np.ndarray, positions: int) -> bool:
     """det(A - s B) vanishes for every s: the linearized equations do not determine the motion (a coordinate with
-    neither mass nor inertia on which nothing acts), and any 'eigenvalue' of the pencil is meaningless."""
+    neither mass nor inertia on which nothing acts), and any 'eigenvalue' of the pencil is meaningless. ``A``, ``B``
+    as reduced_pencil gives them (the first ``positions`` rows q' = u); the test is on the balanced pencil."""
     if A.size == 0:
         return False
+    A, B, _w = _balanced(A, B, positions)
     rng = np.random.default_rng(11)
     for _ in range(2):
         s = complex(rng.uniform(-3, 3), rng.uniform(-3, 3))
         sv = np.linalg.svd(A - s * B, compute_uv=False)
-        if sv[-1] > 1e-12 * A.shape[0] * max(1.0, float(sv[0])):
+        if sv[-1] > 1e-12 * A.shape[0] * float(sv[0]):
             return False
     return True
+
+
+def _balanced(A: np.ndarray, B: np.ndarray, positions: int) -> tuple[np.ndarray, np.ndarray, float]:
+    """The pencil in units where mass, stiffness and the rows q' = u are all of size 1: rates measured in
+    w = sqrt(k/m) (u = w v), the equations of motion divided by m w (then q' = u reads (s/w) q = v). Returns
+    (R A T / w, R B T, w) with R = diag(1, 1/(m w)), T = diag(1, w): its eigenvalues are those of (A, B) divided
+    by w and it is singular exactly when (A, B) is, but a rank test sees the same pencil at any units (a
+    picometre linkage has M ~ 1e-24 and K ~ 1e-12 beside the identity's 1s)."""
+    p = positions
+    m = float(np.max(np.abs(B[p:, p:]))) if B[p:, p:].size else 0.0
+    k = float(np.max(np.abs(A[p:, :p]))) if A[p:, :p].size else 0.0
+    c = float(np.max(np.abs(A[p:, p:]))) if A[p:, p:].size else 0.0
+    if m == 0.0:
+        return A, B, 1.0
+    w = math.sqrt(k / m) if k > 0 else (c / m if c > 0 else 1.0)
+    rows = np.r_[np.ones(p), np.full(A.shape[0] - p, 1.0 / (m * w))]
+    cols = np.r_[np.ones(p), np.full(A.shape[1] - p, w)]
+    return rows[:, None] * A * cols / w, rows[:, None] * B * cols, w
 
 
 def massless_coordinates(problem: EquilibriumProblem, e: Equilibrium) -> list[str]:
@@ -153,14 +182,14 @@ def assess(problem: EquilibriumProblem, e: Equilibrium, p: np.ndarray) -> None:
     if hasattr(problem, "assess"):
         return problem.assess(e, p)
     problem.current_parameters = p
-    A, B, _N = reduced_pencil(problem, e)
+    A, B, N = reduced_pencil(problem, e)
     if not (np.all(np.isfinite(A)) and np.all(np.isfinite(B))):
         e.eigenvalues, e.jacobian, e.critical = np.zeros(0, complex), None, False
         e.stability = "undecided"
         e.reason = ("the linearized equations are not finite here (an overflow or a division by zero: check the "
                     "parameter values, e.g. a length of 1e200 squared), so no verdict is read from them")
         return
-    if singular_pencil(A, B):
+    if singular_pencil(A, B, pencil_positions(problem, N)):
         names = massless_coordinates(problem, e)
         who = (f"{', '.join(names)} carr{'ies' if len(names) == 1 else 'y'} no mass or inertia" if names
                else "a combination of the coordinates carries no mass or inertia")
@@ -181,7 +210,7 @@ def assess(problem: EquilibriumProblem, e: Equilibrium, p: np.ndarray) -> None:
         e.reason = (f"the linearized equations do not determine the motion: {who} and no stiffness or damping "
                     f"acts on {them} (a singular pencil); give {them} mass or inertia, or make {them} prescribed")
         return
-    vals, J = eigen(A, B)
+    vals, J = eigen(A, B, pencil_positions(problem, N))
     e.eigenvalues, e.jacobian = vals, J
     if not len(vals):  # not 'all eigenvalues have negative real parts', which held only for want of any
         e.critical = False
@@ -207,14 +236,10 @@ def _conservative_linear(problem, e, p, vals, tol, stability, reason) -> tuple[s
     simple frequencies are gyroscopically stabilized: reported stable, with the basis stated (linear stability;
     e.g. the free rigid body spinning about its minor axis, where the energy test alone is inconclusive)."""
     model = problem.model
-    Q = model.generalized_forces
-    if Q != sp.zeros(*Q.shape):
-        args = list(model.q) + list(model.u) + list(model.parameter_symbols)
-        fn = compile_exprs(list(Q.xreplace({model.t: 0})), args)
-        rng = np.random.default_rng(9)
-        n = len(model.q)
-        if any(np.max(np.abs(fn(*rng.uniform(-2, 2, 2 * n), *p))) > 1e-12 for _ in range(3)):
-            return stability, reason
+    Q = model.generalized_forces.xreplace({model.t: 0})
+    values = dict(zip(model.parameter_symbols, p))
+    if not all(identically_zero(entry, values) for entry in Q):  # relative to each force's own terms
+        return stability, reason
     if np.max(np.abs(vals.real)) > tol:
         return stability, reason
     # a zero eigenvalue of a Jordan block (rigid-body drift) splits numerically into +-sqrt(eps)-sized pairs
@@ -291,15 +316,11 @@ def _dissipation(problem, e, p: np.ndarray) -> tuple[bool, bool, str, np.ndarray
     if Q == sp.zeros(*Q.shape):
         return True, False, "", none
     rng = np.random.default_rng(4)
-    everything = list(model.q) + list(model.u) + list(model.parameter_symbols)
     Qt = Q.xreplace({model.t: 0})
+    values = dict(zip(model.parameter_symbols, p))
     for c in problem.cyclic:
-        i = model.coordinates.index(c)
-        if Qt[i] != 0:
-            fn = compile_exprs([Qt[i]], everything)
-            n = len(model.q)
-            if any(abs(fn(*rng.uniform(-2, 2, 2 * n), *p)[0]) > 1e-12 for _ in range(3)):
-                return False, False, f"a force acts on the cyclic coordinate {c}, so its momentum is not conserved", none
+        if not identically_zero(Qt[model.coordinates.index(c)], values):  # relative to the force's own terms
+            return False, False, f"a force acts on the cyclic coordinate {c}, so its momentum is not conserved", none
     rest = {u: 0 for u in model.u}
     rest[model.t] = 0
     nc = [model.coordinates.index(c) for c in problem.free]
@@ -318,9 +339,9 @@ def _dissipation(problem, e, p: np.ndarray) -> tuple[bool, bool, str, np.ndarray
         *q, *u, *p), dtype=float).reshape(len(model.q), len(model.q))
     D = (D + D.T) / 2
     Dn = D[np.ix_(nc, nc)]
-    if np.min(np.linalg.eigvalsh(D)) < -1e-12 * max(1.0, np.max(np.abs(D))):
+    if np.min(np.linalg.eigvalsh(D)) < -1e-12 * np.max(np.abs(D)):  # relative: damping of any size
         return False, False, "the velocity-dependent forces can feed energy in", none
-    complete = bool(Dn.size and np.min(np.linalg.eigvalsh(Dn)) > 1e-12 * max(1.0, np.max(np.abs(Dn))))
+    complete = bool(Dn.size and np.min(np.linalg.eigvalsh(Dn)) > 1e-12 * np.max(np.abs(Dn)))
     if problem.m:
         complete = False
     return True, complete, "", (positional + positional.T) / 2
