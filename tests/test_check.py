@@ -306,3 +306,41 @@ def test_the_expected_text_shows_the_tolerance_that_applies(kw, text):
     from mechsys.analysis.batch.check import _expected_text
 
     assert _expected_text(expectation(output="y", value=1.0, **kw)) == text
+
+
+MEMS_ROD = """\
+name: mems_rod
+parameters: {m: 1.0e-9, L: 1.0e-4, g: 9.81}
+coordinates:
+  theta: {initial: 0.1}
+links:
+  rod:
+    joint: {type: revolute, parent: ground, axis: z, coordinate: theta}
+    mass: m
+    center_of_mass: [0, -L/2, 0]
+    shape: {rod: {length: L, axis: y}}
+forces:
+  - {type: gravity, acceleration: [0, -g, 0]}
+expect:
+  - {name: right M, analysis: derive, output: "M[1,1]", expression: m*L**2/3}
+  - {name: right f, analysis: derive, output: "f[1]", expression: -m*g*L/2*sin(theta)}
+  - {name: M a quarter, analysis: derive, output: "M[1,1]", expression: m*L**2/12}
+  - {name: M zero, analysis: derive, output: "M[1,1]", expression: "0"}
+  - {name: f sign, analysis: derive, output: "f[1]", expression: m*g*L/2*sin(theta)}
+"""
+
+
+def test_expression_checks_are_relative_to_the_entry_at_any_scale(tmp_path):
+    """A MEMS rod (1e-9 kg, 100 um): M = m L^2/3 = 3.3e-18 about its end (closed form), f = -m g L/2 sin(theta).
+    Against |a - b| / max(1, |a|, |b|) every wrong expectation passed, 0 included. Now the scale is the entry's
+    own size: the right ones pass, a quarter of M, zero and the wrong sign fail with their true relative
+    differences (3/4, 1, 2)."""
+    model = tmp_path / "mems_rod.yaml"
+    model.write_text(MEMS_ROD, encoding="utf-8")
+    proc = mechsys_check(model, "-f", "json")
+    assert proc.returncode == 1, proc.stdout + proc.stderr
+    rows = {r["name"]: r for r in json.loads(proc.stdout)["results"]}
+    assert [rows[k]["status"] for k in ("right M", "right f", "M a quarter", "M zero", "f sign")] == \
+        ["pass", "pass", "fail", "fail", "fail"]
+    assert [rows[k]["message"] for k in ("M a quarter", "M zero", "f sign")] == \
+        ["max relative difference 7.50e-01", "max relative difference 1.00e+00", "max relative difference 2.00e+00"]
