@@ -252,3 +252,39 @@ forces:
 """)
     latex = run_cli("derive", path, "-f", "latex").stdout
     assert "\\dot{\\theta} \\mathrm{thetadot}" in latex and "\\dot{\\theta} \\dot{\\theta}" not in latex
+
+
+def test_names_sympy_would_print_alike_are_printed_as_written(tmp_path):
+    """Parameters l2 and l_2 (and alpha1, alpha_1) are both l_{2} (\\alpha_{1}) in sympy's LaTeX, so an equation
+    with both read as one symbol. Such names are printed upright as written, in LaTeX and Markdown; a name without
+    a twin keeps sympy's form (l_{3}, theta's \\theta). A parameter z_7 printed like the subexpression z7: the
+    subexpressions then take another prefix."""
+    path = tmp_path / "twins.yaml"
+    path.write_text("""\
+name: twins
+parameters: {m: 1, l2: 0.5, l_2: 0.3, l3: 0.2, alpha1: 0.1, alpha_1: 0.2, g: 9.81}
+coordinates: {theta: {initial: 0.1}, phi: {initial: 0.2}}
+links:
+  upper:
+    joint: {type: revolute, parent: ground, axis: z, coordinate: theta}
+    mass: m
+    center_of_mass: [0, -l2, 0]
+  lower:
+    joint: {type: revolute, parent: upper, axis: z, coordinate: phi, origin: [0, -l_2 - l3, 0]}
+    mass: m
+    center_of_mass: [0, -l2, 0]
+forces:
+  - {type: gravity, acceleration: [0, -g, 0]}
+  - {type: generalized_force, coordinate: phi, value: -alpha1*der(phi) - alpha_1*der(theta)}
+""")
+    for fmt in ("latex", "markdown"):
+        out = run_cli("derive", path, "-f", fmt).stdout
+        assert "\\mathrm{l2}" in out and "\\mathrm{l\\_2}" in out and "l_{2}" not in out
+        assert "\\mathrm{alpha1}" in out and "\\mathrm{alpha\\_1}" in out and "\\alpha_{1}" not in out
+        assert "l_{3}" in out and "\\dot{\\theta}" in out
+    plain = run_cli("derive", SYSTEMS_DIR / "four_bar.yaml", "-f", "latex").stdout
+    assert "l_{2}" in plain and "\\mathrm" not in plain
+    shared = tmp_path / "shared.yaml"
+    shared.write_text(path.read_text().replace("l3", "z_1"))
+    named = run_cli("derive", shared, "-f", "latex", "--subexpressions", "named").stdout
+    assert "z_{1}" in named and "zz_{1}" in named

@@ -7,9 +7,10 @@ from typing import TYPE_CHECKING, Callable
 
 import sympy as sp
 
+from mechsys.mechanics.dag import FreeSymbols
 from mechsys.mechanics.model import Equations
 from mechsys.report.printing import (AUTO_NODES, SubexpressionNames, collecting, definition_latex, definition_text,
-                                     naming, shared_subexpressions, to_latex, to_text)
+                                     distinct_latex, naming, shared_subexpressions, to_latex, to_text)
 from mechsys.report.readable import readable, stored_readable
 
 if TYPE_CHECKING:
@@ -267,7 +268,9 @@ def _note(note: str, fmt: str) -> str:
 
 def _named_or_inline(eq: Equations, name: str, fmt: str, extra: dict | None, raw: bool, subexpressions: str) -> str:
     eq = eq.interned()  # the printers' memo, census and names meet each value once
-    with shared_subexpressions():
+    latex = fmt in ("latex", "markdown")
+    symbols = FreeSymbols().of_all([*eq.M, *eq.f, *eq.Q, *eq.A, *eq.b, eq.T, eq.V, *eq.q]) if latex else ()
+    with distinct_latex(s.name for s in symbols), shared_subexpressions():
         write = _writer(eq, name, fmt, extra, tidy=fmt != "json" and not raw)
         if subexpressions == "inline" or (subexpressions == "auto" and fmt == "json"):
             text = write(())
@@ -279,8 +282,8 @@ def _named_or_inline(eq: Equations, name: str, fmt: str, extra: dict | None, raw
                 text = write(())
             else:
                 with naming(names):
-                    defined = definition_latex if fmt in ("latex", "markdown") else definition_text
-                    label = to_latex if fmt in ("latex", "markdown") else to_text
+                    defined = definition_latex if latex else definition_text
+                    label = to_latex if latex else to_text
                     text = write([(label(sp.Symbol(names.names[z])), defined(z)) for z in names.definitions])
     return text
 

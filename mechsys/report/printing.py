@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 from contextlib import contextmanager
-from typing import Iterator
+from typing import Iterable, Iterator
 
 import sympy as sp
 from sympy.printing.latex import LatexPrinter
@@ -13,6 +13,7 @@ from sympy.printing.str import StrPrinter
 _SHARING = [0]  # depth of shared_subexpressions() blocks
 _NAMING: list["SubexpressionNames | None"] = [None]  # the names in force (naming() block), else None
 _COLLECTING: list["list[sp.Basic] | None"] = [None]  # the expressions a collecting() block was asked to print
+_UPRIGHT: list[frozenset] = [frozenset()]  # names printed upright in LaTeX (distinct_latex() block)
 
 
 class _PrintsEachNodeOnce:
@@ -122,6 +123,7 @@ class SubexpressionNames:
         self._counts, self._order, taken, self.inline_nodes = _census(exprs)
         self.min_length = min_length
         self.prefix = "z"
+        taken = {t.replace("_", "") for t in taken}  # z_7 prints z_{7} in LaTeX, as the subexpression z7 does
         while any(t.startswith(self.prefix) and t[len(self.prefix):].isdigit() for t in taken):
             self.prefix += "z"
         self.names: dict[sp.Basic, str] = {}
@@ -293,7 +295,11 @@ class _DottedLatexPrinter(_PrintsEachNodeOnce, LatexPrinter):
 
     def _print_Symbol(self, expr: sp.Symbol, style: str = "plain") -> str:
         dotted = _dotted(expr.name)
-        return dotted if dotted is not None else _undotted(expr.name, super()._print_Symbol(expr, style))
+        if dotted is not None:
+            return dotted
+        if expr.name in _UPRIGHT[0]:
+            return _upright(expr.name)
+        return _undotted(expr.name, super()._print_Symbol(expr, style))
 
     def _name(self, name: str) -> str:
         return _latex_name(name)
@@ -351,15 +357,39 @@ def definition_latex(expr: sp.Basic) -> str:
 
 
 def _latex_name(name: str) -> str:
+    if name in _UPRIGHT[0]:
+        return _upright(name)
     return _undotted(name, sp.latex(sp.Symbol(name)))
+
+
+def _upright(name: str) -> str:
+    return "\\mathrm{" + name.replace("_", "\\_") + "}"
+
+
+@contextmanager
+def distinct_latex(names: Iterable[str]) -> Iterator[None]:
+    """Within the block, LaTeX prints upright, as written, every one of ``names`` (a model's symbol names; rates
+    der(x) follow x) whose sympy LaTeX another of them shares: l2 and l_2 are both l_{2}, alpha1 and alpha_1 both
+    \\alpha_{1}, and an equation with both would read as if one symbol were meant."""
+    by_tex: dict[str, set[str]] = {}
+    for name in set(names):
+        while name.startswith("der(") and name.endswith(")"):
+            name = name[4:-1]
+        by_tex.setdefault(sp.latex(sp.Symbol(name)), set()).add(name)
+    previous = _UPRIGHT[0]
+    _UPRIGHT[0] = frozenset(n for group in by_tex.values() if len(group) > 1 for n in group)
+    _LATEX.forget()
+    try:
+        yield
+    finally:
+        _UPRIGHT[0] = previous
+        _LATEX.forget()
 
 
 def _undotted(name: str, tex: str) -> str:
     """``tex``, sympy's LaTeX of a model name, unless sympy turned a suffix into a dot (thetadot, xddot): then the
     name upright as written, since \\dot{\\theta} is der(theta)'s (thetadot*der(theta) read as a square)."""
-    if "\\dot{" in tex or "\\ddot{" in tex:
-        return "\\mathrm{" + name.replace("_", "\\_") + "}"
-    return tex
+    return _upright(name) if "\\dot{" in tex or "\\ddot{" in tex else tex
 
 
 def _dotted(name: str) -> str | None:
