@@ -295,3 +295,28 @@ def test_the_arithmetic_check_allows_what_sympy_prints_and_nothing_else():
                 "def _f(a0):\n    return [__import__('os')]", "def _f(a0):\n    return [math.sin.__self__]"]:
         with pytest.raises(ValueError):
             check_source(bad)
+
+
+def test_the_stored_steady_motion_pieces_do_not_decide_autonomy_for_other_values(private_cache, tmp_path):
+    """The rolling disk with a lean torque A sin(w t): at A = 0 it is autonomous (steady motions), at A = 1 it is
+    not (f has sin(w t): no steady motion). The nonholonomic pieces' cache entry (keyed without parameter values)
+    stored 'autonomous' from the first run, so `equilibria --set A=1` after an A = 0 run listed two 'stable'
+    steady motions, and A = 0 after A = 1 refused. Each order now gives what an uncached run gives."""
+    from typer.testing import CliRunner
+
+    from mechsys.cli import app
+
+    text = (SYSTEMS_DIR / "rolling_disk.yaml").read_text().split("\nexpect:")[0]
+    data, _ = load_yaml(text, "rolling_disk.yaml")
+    data["parameters"].update({"A": 0, "w": 3})
+    data["forces"].append({"type": "generalized_force", "coordinate": "lean", "value": "A*sin(w*t)"})
+    path = tmp_path / "disk_pushed.yaml"
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    runner = CliRunner()
+    for order in (("0", "1"), ("1", "0")):
+        for value in order:
+            result = runner.invoke(app, ["equilibria", str(path), "--set", f"A={value}", "-f", "json"])
+            if value == "0":
+                assert result.exit_code == 0, result.output
+            else:
+                assert result.exit_code == 1 and "non-autonomous" in result.output, result.output

@@ -73,7 +73,6 @@ class ConstrainedPieces:
         if not self._usable(entry, model):
             entry = self._generate(model, method)
             cache.store(key, entry)
-        self.autonomous = entry["autonomous"]
         self.read = np.array(entry["read"], dtype=bool)  # which parameters E reads (its expressions' symbols)
         self.n_args = 3 * self.n + self.m + len(model.parameter_symbols)
         self._full_size = self._outputs + self.size * 2 * self.n
@@ -91,7 +90,7 @@ class ConstrainedPieces:
     def _usable(self, entry: dict | None, model: MechanicalModel) -> bool:
         """A stored entry of this shape: C source or None, both Python sources or (with C) neither."""
         if not (isinstance(entry, dict) and entry.get("size") == self.size
-                and isinstance(entry.get("autonomous"), bool) and isinstance(entry.get("c"), (str, type(None)))
+                and isinstance(entry.get("c"), (str, type(None)))
                 and isinstance(entry.get("read"), list) and len(entry["read"]) == len(model.parameter_symbols)
                 and all(isinstance(r, bool) for r in entry["read"])):
             return False
@@ -139,7 +138,8 @@ class ConstrainedPieces:
 
     def _generate(self, model: MechanicalModel, method: str) -> dict:
         """The cache entry: the C source of the program (None when an expression has no C form) and, unless a C
-        compiler is there to build it, the Python sources; which parameters E reads; whether it is autonomous."""
+        compiler is there to build it, the Python sources; which parameters E reads. (Not whether it is autonomous:
+        that depends on the parameter values, which this key leaves out; model.is_autonomous keys them.)"""
         outputs, args, program = self._expressions(model, method)
         wrt, functions = args[:2 * self.n], {"mechsys_values": (self.size, False), "mechsys_full": (len(outputs), True)}
         # the tangents printed straight to C (numeric/tangents.py); a node without a rule there: sympy's derivatives
@@ -149,8 +149,7 @@ class ConstrainedPieces:
         python = ({"source": None, "values": None} if c_source is not None and native.compiler() is not None
                   else self._python_sources(outputs, args, program))
         used = FreeSymbols().of_all(outputs[:self.size])
-        return {"size": self.size, "c": c_source, **python, "autonomous": model.is_autonomous(method),
-                "read": [s in used for s in model.parameter_symbols]}
+        return {"size": self.size, "c": c_source, **python, "read": [s in used for s in model.parameter_symbols]}
 
     def residual(self, q: np.ndarray, u: np.ndarray, a: np.ndarray, lam: np.ndarray, p: np.ndarray) -> np.ndarray:
         """E alone (no derivatives): what a line search evaluates."""
@@ -402,7 +401,7 @@ class NonholonomicProblem(EquilibriumProblem):
         self.model = model
         self.method = method
         self.pieces = constrained_pieces(model, method)
-        if not self.pieces.autonomous:
+        if not model.is_autonomous(method):
             raise AnalysisError("the equations depend explicitly on time (non-autonomous): there are no "
                                 "steady motions in the ordinary sense")
         names = model.coordinates
