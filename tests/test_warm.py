@@ -103,3 +103,37 @@ def test_drives_take_the_full_path(tmp_path):
     _run(tmp_path, model, "--t-end", "0.2")
     out, light = _run(tmp_path, model, "--t-end", "0.2")
     assert not light and "driving force" in out
+
+
+def test_a_file_saved_during_a_run_does_not_get_the_old_plan(tmp_path, monkeypatch):
+    """The plan was keyed by the file as it was after the run: a double pendulum saved with m2 = 3 while its m2 =
+    0.8 run integrated stored the m2 = 0.8 plan under the new content's key, and every later run of that content
+    integrated the old model. The key is now the loaded text's: the saved content runs its own model (as with the
+    cache off), and the old content still finds its plan."""
+    import mechsys.analysis.motion.charted as charted
+    from mechsys.analysis.motion.simulate import SimulationOptions
+    from mechsys.analysis.motion.warm import plan_key, simulate_file
+
+    monkeypatch.setenv("MECHSYS_CACHE", str(tmp_path / "cache"))
+    old = (SYSTEMS_DIR / "double_pendulum.yaml").read_text().split("\nexpect:")[0] + "\n"
+    new = old.replace("m2: 0.8", "m2: 3.0")
+    assert new != old
+    path = tmp_path / "dp.yaml"
+    path.write_text(old)
+    run = charted.simulate_charted
+
+    def saved_meanwhile(*args, **kwargs):
+        path.write_text(new)  # the user saves the file while the run integrates
+        return run(*args, **kwargs)
+
+    monkeypatch.setattr(charted, "simulate_charted", saved_meanwhile)
+    options = SimulationOptions(t_end=1.0, dt=0.01)
+    simulate_file(path, [], options)
+    monkeypatch.setattr(charted, "simulate_charted", run)
+    from mechsys.numeric import cache
+
+    assert cache.load(plan_key(path, [], old)) is not None and cache.load(plan_key(path, [], new)) is None
+    warm, _ = simulate_file(path, [], options)  # the new content: its own model
+    monkeypatch.setenv("MECHSYS_CACHE", "off")
+    cold, _ = simulate_file(path, [], options)
+    assert warm.q[-1].tolist() == cold.q[-1].tolist()

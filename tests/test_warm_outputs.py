@@ -258,3 +258,26 @@ def test_a_second_codegen_writes_the_same_files_without_sympy(tmp_path, monkeypa
     for damaged in ({"files": {"../escape.c": "x"}}, {"files": {"a.c": 1}}, {"files": {}}, {"text": "x"}):
         cache.store(key, damaged)
         assert warm.load_files(key) is None
+
+
+def test_a_file_saved_between_the_key_and_the_load_keeps_no_output(tmp_path, monkeypatch):
+    """`derive` hashed the file once for its key and read it again to load the model: a file saved in between (m2
+    0.8 -> 3.0) stored m2 = 3.0's equations under m2 = 0.8's key, and every later `derive` of the m2 = 0.8 content
+    printed m2 = 3.0. Such an output is now not kept; an unchanged file's is."""
+    from mechsys.cli import load_model
+
+    monkeypatch.setenv("MECHSYS_CACHE", str(tmp_path / "cache"))
+    old = (SYSTEMS_DIR / "double_pendulum.yaml").read_text().split("\nexpect:")[0] + "\n"
+    path = tmp_path / "dp.yaml"
+    path.write_text(old)
+    key = warm.output_key("derive", path, {"format": "json"})
+    path.write_text(old.replace("m2: 0.8", "m2: 3.0"))  # saved while the command imports
+    model = load_model(path, None)
+    assert model.parameters["m2"] == 3.0
+    warm.store_text(key, "m2 = 3.0's equations")
+    assert warm.load_text(key) is None
+    path.write_text(old)
+    key = warm.output_key("derive", path, {"format": "json", "other": 1})
+    load_model(path, None)
+    warm.store_text(key, "m2 = 0.8's equations")
+    assert warm.load_text(key) == "m2 = 0.8's equations"

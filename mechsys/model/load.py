@@ -95,6 +95,11 @@ class Document:
 
     _text: str = ""
 
+    @property
+    def text(self) -> str:
+        """The file's text as it was read for this document (what cache keys of its results must hash)."""
+        return self._text
+
     # ------------------------------------------------------------------------------------- lookups
     def suggest(self, name: str, options: list[str]) -> str:
         close = difflib.get_close_matches(name, options, n=1)

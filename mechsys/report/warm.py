@@ -9,7 +9,8 @@ command, every option that shapes the output (the `--set` assignments in their o
 of the whole package and the versions of sympy, numpy and scipy (a printer or a rank decision may change with them),
 and for the numeric commands the C compilers used (none, or MECHSYS_NATIVE=off: the Python path, whose last digits
 may differ; and the quick compiler of the straight-line programs). Entries are signed like every cache entry
-(numeric/cache.py) and checked for their shape. Commands that fail, that verify or draw (`derive --check`,
+(numeric/cache.py) and checked for their shape. An output is kept only when the model was loaded from the text its
+key hashed (`loaded`: a file saved during the command keeps nothing). Commands that fail, that verify or draw (`derive --check`,
 `equilibria --verify`, `--plot`) and runs with the cache off are never stored or read. Imports nothing heavy."""
 from __future__ import annotations
 
@@ -24,6 +25,9 @@ if TYPE_CHECKING:
     from mechsys.analysis.facts import Info
 
 _SOURCE: list[str] = []
+#: key -> (the file, the text its key hashed); a key whose file was then loaded with other text is never stored
+_HASHED: dict[str, tuple[str, str]] = {}
+_STALE: set[str] = set()
 
 
 def package_fingerprint() -> str:
@@ -61,7 +65,20 @@ def output_key(command: str, path: Path, options: dict[str, Any]) -> str | None:
                           "code": package_fingerprint()}, sort_keys=True)
     digest = hashlib.sha256(text.encode("utf-8"))
     digest.update(b"\0" + payload.encode())
-    return digest.hexdigest()[:32]
+    key = digest.hexdigest()[:32]
+    _HASHED[key] = (str(Path(path).resolve()), text)
+    return key
+
+
+def loaded(path: Path, text: str) -> None:
+    """The command's model was read from ``path`` with this text: a key made from other text of the same file (saved
+    between the key and the load) must not keep this output, which is the new text's."""
+    where = str(Path(path).resolve())
+    _STALE.update(key for key, (file, hashed) in _HASHED.items() if file == where and hashed != text)
+
+
+def _storable(key: str | None) -> bool:
+    return key is not None and key not in _STALE
 
 
 def load_text(key: str | None) -> str | None:
@@ -72,7 +89,7 @@ def load_text(key: str | None) -> str | None:
 
 
 def store_text(key: str | None, text: str) -> None:
-    if key is not None:
+    if _storable(key):
         cache.store(key, {"text": text})
 
 
@@ -88,7 +105,7 @@ def load_files(key: str | None) -> dict[str, str] | None:
 
 
 def store_files(key: str | None, files: dict[str, str]) -> None:
-    if key is not None:
+    if _storable(key):
         cache.store(key, {"files": dict(files)})
 
 
@@ -138,7 +155,7 @@ def _uncell(x: Any) -> Any:
 
 def store_tables(key: str | None, tables: list, payload: Any) -> None:
     """Keep the tables and the JSON payload that were printed (their cells and the payload as JSON data)."""
-    if key is None:
+    if not _storable(key):
         return
     from mechsys.report.tables import _json_default
 
@@ -172,7 +189,7 @@ def load_tables(key: str | None) -> tuple[list, Any] | None:
 
 def store_info(key: str | None, info: Info) -> None:
     """Keep the facts, when they are plain JSON data that reads back to the same Info."""
-    if key is None:
+    if not _storable(key):
         return
     facts = info.to_dict()
     try:

@@ -29,17 +29,23 @@ if TYPE_CHECKING:
 STIFF_STEPS = 5e4  # the same threshold as simulate.choose_method
 
 
-def plan_key(path: Path, overrides: Sequence[str]) -> Optional[str]:
-    """Key of the run plan for this exact file content and options; None when caching is off or unreadable."""
+def plan_key(path: Path, overrides: Sequence[str], text: Optional[str] = None) -> Optional[str]:
+    """Key of the run plan for this exact file content and options; None when caching is off or unreadable.
+    ``text``: the content the plan was made from (the loaded model's), not the file as it is now: a file saved
+    during a run stored the old content's plan under the new content's key."""
     if cache.cache_dir() is None:
         return None
-    try:
-        data = Path(path).read_bytes()
-    except OSError:
-        return None
+    if text is None:
+        from mechsys.errors import InputError
+        from mechsys.model.files import read_model_text
+
+        try:
+            text = read_model_text(path)
+        except InputError:
+            return None
     from mechsys import __version__
 
-    digest = hashlib.sha256(data)
+    digest = hashlib.sha256(text.encode("utf-8"))
     digest.update(json.dumps({"set": list(overrides), "version": __version__, "code": cache.code_fingerprint(),
                               "what": "simulate-plan"}, sort_keys=True).encode())
     return digest.hexdigest()[:32]
@@ -135,7 +141,7 @@ def run_planned(path: Path, overrides: Sequence[str], options: SimulationOptions
 
 def remember(path: Path, overrides: Sequence[str], model: MechanicalModel, result: SimulationResult) -> None:
     """Store the plan of a native run so the next identical run starts warm (no-op for other methods)."""
-    key = plan_key(path, overrides)
+    key = plan_key(path, overrides, model.doc.text)  # the content this run was made from
     drives = any(con.name.startswith("drive(") for con in model.kin.constraints)  # need the multipliers
     if key is None or result.method != "native" or drives or model.events or model.kin.contacts:
         return
