@@ -214,6 +214,9 @@ def load_model(file: Path, assignments: Optional[List[str]]) -> MechanicalModel:
     from mechsys.model.load import parse_assignments
 
     model = mechsys.load(file, parse_assignments(assignments))
+    from mechsys.report import warm
+
+    warm.loaded(file, model.doc.text)  # (a kept output is this text's)
     if _ONE_SHOT:
         gc.freeze()  # see entry()
     return model
@@ -1066,10 +1069,8 @@ def sweep(
         sw.check_names(model, axes)
         names = [a.name for a in axes]
         tasks = sw.make_tasks(axes, sampling, seed)
-        resume = sw.load_resume(output, names, model)
-        from mechsys.model.files import read_model_text
-
-        spec = sw.SweepSpec(str(file.resolve()), read_model_text(file), tuple(sets.items()), analysis, options)
+        spec = sw.SweepSpec(str(file.resolve()), model.doc.text, tuple(sets.items()), analysis, options)
+        resume = sw.load_resume(output, names, model, spec)
 
         from rich.console import Console
         from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn,

@@ -180,6 +180,27 @@ def test_resume_skips_finished_tasks_and_equals_a_fresh_run(tmp_path):
     assert r.exit_code == 2 and "holds a sweep over (Mo)" in r.stderr
 
 
+def test_resume_refuses_a_table_of_another_model_or_options(tmp_path):
+    """A sweep run again into the same file after the model changed (a mass in the file, a --set or an
+    --option) skipped every task and kept the old model's results. The rows now carry `spec` (the model text,
+    --set, --run and --option), and a table made from another spec is refused; the same command still resumes."""
+    source = (SYSTEMS / "motor_arm.yaml").read_text()
+    model = tmp_path / "arm.yaml"
+    model.write_text(source)
+    common = ["--param", "Mo=1:2:2", "--run", "simulate", "--jobs", 1, "-f", "json", "-o", tmp_path / "r.csv"]
+    r = invoke(model, *common, "--option", "t_end=0.5")
+    assert r.exit_code == 0, r.output + r.stderr
+    specs = {row["spec"] for row in read(tmp_path / "r.csv")}
+    assert len(specs) == 1 and len(specs.pop()) == 12
+    assert json.loads(invoke(model, *common, "--option", "t_end=0.5").stdout)["skipped"] == 2
+    for changed in (["--option", "t_end=0.6"], ["--option", "t_end=0.5", "--set", "m=2"]):
+        r = invoke(model, *common, *changed)
+        assert r.exit_code == 2 and "holds results made from another model file" in r.stderr, r.stderr
+    model.write_text(source.replace("name:", "# edited\nname:", 1))
+    r = invoke(model, *common, "--option", "t_end=0.5")
+    assert r.exit_code == 2 and "holds results made from another model file" in r.stderr
+
+
 # ------------------------------------------------------------------------------------- failures
 def test_failing_tasks_are_recorded_not_fatal(tmp_path):
     out = tmp_path / "modes.csv"

@@ -39,6 +39,7 @@ if TYPE_CHECKING:
 EXECUTORS = ("processes", "dask")
 FIXED_TAIL = ("status", "error", "seconds")
 TASK = "task"
+SPEC = "spec"  # what made the row besides its inputs: SweepSpec.fingerprint (resume refuses another)
 OPTION_KEYS = {  # analysis -> option keys it understands (see mechsys/analysis/batch/tasks.py); others: any key
     "simulate": ("t_end", "dt", "method"),
     "equilibria": ("search",),
@@ -211,6 +212,14 @@ class SweepSpec:
     @cached_property
     def digest(self) -> str:
         return hashlib.sha256(self.text.encode("utf-8")).hexdigest()[:20]
+
+    @cached_property
+    def fingerprint(self) -> str:
+        """The model file's text, `--set`, `--run` and `--option`: the same for every row of one sweep, another
+        for a table made from anything else (the `spec` column)."""
+        data = json.dumps({"text": self.text, "sets": [list(kv) for kv in self.sets], "analysis": self.analysis,
+                           "options": self.options}, sort_keys=True, default=str)
+        return hashlib.sha256(data.encode("utf-8")).hexdigest()[:12]
 
     def payload(self) -> dict:
         return {"path": self.path, "text": self.text, "digest": self.digest, "sets": list(self.sets),
@@ -426,9 +435,9 @@ class Table:
 
     @property
     def columns(self) -> list[str]:
-        fixed = {TASK, *self.inputs, *FIXED_TAIL}
+        fixed = {TASK, *self.inputs, SPEC, *FIXED_TAIL}
         outputs = sorted({c for r in self.rows for c in r if c not in fixed}, key=_natural)
-        return [TASK, *self.inputs, *outputs, *FIXED_TAIL]
+        return [TASK, *self.inputs, *outputs, SPEC, *FIXED_TAIL]
 
 
 def _csv_cell(v: Any) -> str:
@@ -553,10 +562,18 @@ class Resume:
     others: list[dict]  # old rows of tasks not in this sweep (kept at the end)
 
 
-def load_resume(path: Path | None, names: list[str], model: MechanicalModel) -> Resume:
+def load_resume(path: Path | None, names: list[str], model: MechanicalModel, spec: SweepSpec) -> Resume:
+    """The rows of an existing --output to resume from; an InputError when it holds a sweep over other inputs, or
+    rows made from another model text, `--set`, `--run` or `--option` (their `spec` differs: resumed, they kept
+    the old model's results). A table without the column (written before it) is trusted as it is."""
     if path is None or not path.exists():
         return Resume({}, [])
     columns, rows = read_table(path)
+    other = sorted({str(r[SPEC]) for r in rows if r.get(SPEC) not in (None, "", spec.fingerprint)})
+    if other:
+        raise InputError(f"--output {path} holds results made from another model file, --set, --run or --option "
+                         f"(spec {', '.join(other)}; this run's is {spec.fingerprint}): remove it or choose another "
+                         f"file")
     valid = set(sweepable_names(model))
     old_inputs = []
     for c in columns[1:]:
@@ -744,7 +761,7 @@ def sweep(spec: SweepSpec, names: list[str], tasks: list[dict[str, float]], resu
 
     def on_chunk(results: list[dict]) -> None:
         for res in results:
-            new[res["task"]] = _row(res, names)
+            new[res["task"]] = {**_row(res, names), SPEC: spec.fingerprint}
             if res["status"] == "ok":
                 summary.done += 1
                 summary.moved += float(res["outputs"].get("start_moved", 0.0)) > MOVED
