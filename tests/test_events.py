@@ -209,3 +209,47 @@ def test_native_with_events_is_an_option_conflict():
 
     line = one_line(invoke("simulate", FALL, "--method", "native", "--t-end", "0.1"), code=2)
     assert "--method native: events need scipy's event location; use DOP853" in line
+
+
+BOUNCING = """\
+name: ball_events
+parameters: {m: 0.1, h: 1.0, e: 0.5, g: 9.81}
+coordinates:
+  y: {initial: h, rate: 0}
+links:
+  ball:
+    particle: true
+    joint: {type: prismatic, parent: ground, axis: y, coordinate: y}
+    mass: m
+forces:
+  - {type: gravity, acceleration: [0, -g, 0]}
+contacts:
+  - {name: floor, gap: y, restitution: e}
+events:
+"""
+
+
+@pytest.mark.parametrize("method,rtol", [("auto", 1e-10), ("auto", 1e-8), ("RK45", 1e-10)])
+def test_events_of_a_model_with_contacts_stop_and_record_where_they_cross(tmp_path, method, rtol):
+    """A ball dropped from h onto a floor with restitution e touches down at t1 = sqrt(2 h / g), t1 (1 + 2 e) and
+    t1 (1 + 2 e + 2 e^2) (closed form). With a contact in the model:
+    - a stop event at y = h/8 stopped the run without its state: the last row was the output point before
+      (y = 0.1265 at t = 0.422) and the summary did not say it stopped; the run now ends at the event;
+    - an event written as the contact's gap (`y` falling) crosses at each impact's instant, and scipy kept only
+      whichever of the two came first by rounding: a stop at the first touchdown stopped at the second, or never,
+      and a recorded touch was listed at one touchdown of three, or none, depending on rtol and the method."""
+    t1 = math.sqrt(2 * 1.0 / 9.81)
+    touchdowns = [t1, t1 * (1 + 2 * 0.5), t1 * (1 + 2 * 0.5 + 2 * 0.25)]
+    for event, t_stop, y_stop in (("{name: low, expression: y - h/8, direction: falling, action: stop}",
+                                   math.sqrt(2 * 0.875 / 9.81), 0.125),
+                                  ("{name: ground, expression: y, direction: falling, action: stop}", t1, 0.0)):
+        path = tmp_path / "stop.yaml"
+        path.write_text(BOUNCING + f"  - {event}\n")
+        r = simulate(mechsys.load(path), 1.2, 0.001, method=method, rtol=rtol)
+        assert r.t[-1] == pytest.approx(t_stop, abs=1e-9) and r.q[-1, 0] == pytest.approx(y_stop, abs=1e-9)
+        assert [e["action"] for e in r.events] == ["stop"]
+    path = tmp_path / "record.yaml"
+    path.write_text(BOUNCING + "  - {name: touch, expression: y, direction: falling}\n")
+    r = simulate(mechsys.load(path), 1.2, 0.001, method=method, rtol=rtol)
+    assert [e["t"] for e in r.events] == pytest.approx(touchdowns, abs=1e-9)
+    assert [round(i["t"], 9) for i in r.impacts][:3] == [round(t, 9) for t in touchdowns]

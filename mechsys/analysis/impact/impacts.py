@@ -203,7 +203,17 @@ def integrate_with_impacts(job: Integration, y0: np.ndarray, capture_velocity: f
         user = type(sol)(sol)
         user.t_events = sol.t_events[len(own):] if sol.t_events else None
         user.y_events = sol.y_events[len(own):] if sol.y_events else None
+        if sol.status == 1:
+            _add_coincident(job, user, sol, len(own), t, y)
         if job.note_events(user) and sol.status == 1:
+            # the last row is the state at the stopping event (the report names it there), as without contacts
+            t_stop, y_stop = _stop_state(job, user)
+            if c.m:
+                q_stop, u_stop = project(c, p, t_stop, y_stop[:n], y_stop[n:])
+                y_stop = np.concatenate([q_stop, u_stop])
+            keep = [i for i, tt in enumerate(times) if tt < t_stop]
+            times, states, active = ([times[i] for i in keep] + [t_stop], [states[i] for i in keep] + [y_stop],
+                                     [active[i] for i in keep] + [tuple(rhs.persistent)])
             stopped = True
             break
         if sol.status != 1:
@@ -276,6 +286,40 @@ def integrate_with_impacts(job: Integration, y0: np.ndarray, capture_velocity: f
     T_arr = np.array(times)[order]
     Y = np.array(states)[order]
     return T_arr, Y, steps, impacts, stopped, [active[i] for i in order]
+
+
+def _stop_state(job: Integration, user) -> tuple[float, np.ndarray]:
+    """(t, state) of the earliest stopping event of a solve's file events."""
+    stops = [(float(ts[-1]), ys[-1]) for (_n, _e, _d, action), ts, ys in zip(job.model.events, user.t_events,
+                                                                            user.y_events)
+             if action == "stop" and len(ts)]
+    return min(stops, key=lambda ev: ev[0])
+
+
+def _add_coincident(job: Integration, user, sol, skip: int, t0: float, y0: np.ndarray) -> None:
+    """Add to ``user`` (the file's events of a solve that a terminal event ended) the events that cross zero at
+    that very instant without being recorded: scipy keeps only the events up to the first terminal one, and an
+    event written like a contact's gap (`y` falling beside `gap: y`) crosses with it, up to rounding, so which of
+    the two came first depended on the tolerances (a stop at the first touchdown ran on to the second, or to the
+    end). A crossing: the event's value at the end has at most 1e-9 of its size at the solve's last output before
+    it (or its start), which is on the side its direction leaves."""
+    fired = [(float(ts[-1]), i) for i, ts in enumerate(sol.t_events[:skip]) if len(ts)]
+    if not fired or not job.event_fns:
+        return
+    t_end, i_end = min(fired)
+    y_end = sol.y_events[i_end][-1]
+    before = [k for k, tt in enumerate(sol.t) if tt < t_end]
+    t_prev, y_prev = (float(sol.t[before[-1]]), sol.y[:, before[-1]]) if before else (t0, y0)
+    t_events, y_events = list(user.t_events), list(user.y_events)
+    for k, fn in enumerate(job.event_fns):
+        if len(t_events[k]) and abs(float(t_events[k][-1]) - t_end) <= 1e-12 * max(1.0, abs(t_end)):
+            continue
+        g_prev, g_end = float(fn(t_prev, y_prev)), float(fn(t_end, y_end))
+        side = {-1.0: g_prev > 0, 1.0: g_prev < 0}.get(float(getattr(fn, "direction", 0.0)), g_prev != 0)
+        if side and abs(g_end) <= 1e-9 * abs(g_prev):
+            t_events[k] = np.append(t_events[k], t_end)
+            y_events[k] = np.vstack([np.asarray(y_events[k]).reshape(-1, len(y_end)), y_end])
+    user.t_events, user.y_events = t_events, y_events
 
 
 def _record(model, t, name, res, u, u_new, captured, q, p, joint_impulses) -> dict:
