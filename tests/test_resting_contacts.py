@@ -251,3 +251,41 @@ def test_a_contact_simulate_does_not_watch_is_named_and_a_negative_restitution_r
                for n in json.loads(result.output)["notes"])
     bad = CliRunner().invoke(app, ["simulate", str(root / "bouncing_ball.yaml"), "--set", "e=-0.5"])
     assert bad.exit_code == 2 and "contacts[0].restitution: must not be negative" in bad.stderr
+
+
+INCLINE_BALL = """\
+name: incline_ball
+parameters: {m: 0.2, g: 9.81, a: 0.3, e: 0.7, d: 1.0}
+coordinates:
+  x: {initial: -d*sin(a), rate: 0}
+  y: {initial: d*cos(a), rate: 0}
+links:
+  sx:
+    joint: {type: prismatic, parent: ground, axis: x, coordinate: x}
+  ball:
+    particle: true
+    joint: {type: prismatic, parent: sx, axis: y, coordinate: y}
+    mass: m
+forces:
+  - {type: gravity, acceleration: [0, -g, 0]}
+contacts:
+  - {name: slope, point_plane: {point: ball, plane: {point: ground, normal: [-sin(a), cos(a), 0]}}, restitution: e}
+"""
+
+
+def test_a_ball_bouncing_down_a_frictionless_incline_comes_to_rest_on_it_and_slides(tmp_path):
+    """A particle dropped a distance d (normal to a frictionless incline of angle a) bounces with restitution e:
+    the normal bounces end at t1 (1 + e)/(1 - e), t1 = sqrt(2 d / (g cos a)), and along the slope it accelerates at
+    g sin a from rest all the while: x(t) = -(g sin a t^2 / 2) cos a once on the plane (closed form). After the
+    last bounce the closing met at that instant had nothing to resolve and the loop restarted on it 100,000 times
+    (2.5 min) before failing; now the ball rests on the plane and slides down it."""
+    path = tmp_path / "incline_ball.yaml"
+    path.write_text(INCLINE_BALL)
+    result = CliRunner().invoke(app, ["simulate", str(path), "--t-end", "4", "--dt", "0.01", "-f", "json"])
+    assert result.exit_code == 0, result.output
+    summary = json.loads(result.stdout)["simulation summary"]
+    g, a, e, d = 9.81, 0.3, 0.7, 1.0
+    t1 = math.sqrt(2 * d / (g * math.cos(a)))
+    assert summary["last impact at t"] == pytest.approx(t1 * (1 + e) / (1 - e), rel=1e-6)
+    assert summary["x(t_end)"] == pytest.approx(-(g * math.sin(a) * 16 / 2) * math.cos(a), rel=1e-7)
+    assert summary["y(t_end)"] == pytest.approx(-(g * math.sin(a) * 16 / 2) * math.sin(a), rel=1e-7)
