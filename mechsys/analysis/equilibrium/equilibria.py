@@ -441,7 +441,9 @@ def _newton(problem: EquilibriumProblem, z: np.ndarray, p: np.ndarray, roots: li
     """Deflated Newton (Farrell et al.): roots already found repel the iteration; backtracking on |G|. A problem
     with compiled pieces runs the same loop as compiled code (numeric/newton.c)."""
     n = len(z)
-    compiled = getattr(problem, "compiled_newton", None)
+    rows, sizes = equation_scales(problem, p)
+    unit = bool(np.all((rows >= 1e-6) & (rows <= 1e6)) and np.all((sizes >= 1e-6) & (sizes <= 1e6)))
+    compiled = getattr(problem, "compiled_newton", None) if unit else None
     run = compiled(p) if compiled is not None else None
     if run is not None:
         end = run(z, np.array(roots, dtype=float).reshape(len(roots), n), max_iter)
@@ -470,7 +472,7 @@ def _newton(problem: EquilibriumProblem, z: np.ndarray, p: np.ndarray, roots: li
 
     def G_only(z: np.ndarray) -> float:
         """|mu F| for the line search (mu only: no gradient)."""
-        F = problem.F(z, p)
+        F = problem.F(z, p) / rows
         if not np.all(np.isfinite(F)):
             return np.inf
         mu = float(np.prod(1.0 / distances(z)[1] + 1.0)) if len(known) else 1.0
@@ -478,15 +480,17 @@ def _newton(problem: EquilibriumProblem, z: np.ndarray, p: np.ndarray, roots: li
 
     stalls = 0
     for _ in range(max_iter):
-        F = problem.F(z, p)
-        J = problem.J(z, p)
+        # each row and unknown in its own size (equation_scales; ones at ordinary units, where the compiled loop
+        # runs): at MEMS scale the force rows (1e-17 N m) beside the loop rows (1e-5 m) left Newton at its starts
+        F = problem.F(z, p) / rows
+        J = problem.J(z, p) / rows[:, None]
         mu, grad_log = deflation(z)
         G = mu * F
         JG = mu * J + np.outer(F, mu * grad_log)
         if not (np.all(np.isfinite(JG)) and np.all(np.isfinite(G))):
             return None
         try:
-            step = np.linalg.lstsq(JG, -G, rcond=None)[0]
+            step = sizes * np.linalg.lstsq(JG * sizes, -G, rcond=None)[0]
         except np.linalg.LinAlgError:
             return None
         scale = 1.0
@@ -1043,11 +1047,15 @@ def _motions(problem: EquilibriumProblem, z: np.ndarray, p: np.ndarray) -> np.nd
     J = problem.J(z, p)
     if not J.size:
         return np.zeros((0, len(z)))
+    # first in the equations' and unknowns' own sizes: one pass of unit columns and rows leaves a MEMS four-bar's
+    # stiffness (1e-17 N m beside its loop rows' 1e-5 m) at 1e-12 and called its equilibria 'not isolated'
+    rows, sizes = equation_scales(problem, p)
+    J = J / rows[:, None] * sizes
     columns = np.linalg.norm(J, axis=0)
     columns[columns == 0] = 1.0  # a zero column: its unit vector is a null vector either way
     _, sv, Vt = np.linalg.svd(_equilibrated(J))
     sv = np.concatenate([sv, np.zeros(J.shape[1] - sv.size)])
-    null = Vt[sv <= 1e-9 * max(1.0, sv[0])] / columns  # null vectors of J itself (the columns' scaling undone)
+    null = Vt[sv <= 1e-9 * max(1.0, sv[0])] / columns * sizes  # null vectors of J itself (the scalings undone)
     moves = null[:, : problem.nq + len(problem.rate_unknowns)]
     if not moves.size:
         return moves

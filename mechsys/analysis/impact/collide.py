@@ -8,6 +8,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import sympy as sp
 
+from mechsys.numeric import saddle
 from mechsys.numeric.parameters import parameter_values
 from mechsys.errors import AnalysisError, InputError
 from mechsys.mechanics.model import MechanicalModel
@@ -302,7 +303,10 @@ def resolve(model: MechanicalModel, contact: str | None = None, q: np.ndarray | 
         K[n + a + s:, :n] = A
         rhs = np.concatenate([M @ u, -ee[active] * v_before[active] - vt[active],
                               -np.concatenate([vtt[k] for k in stick]) if stick else np.zeros(0), target])
-        sol = np.linalg.lstsq(K, rhs, rcond=None)[0]
+        # in balanced units (numeric/saddle.py): least squares weighs a MEMS pendulum's M ~ 1e-17 as its contact
+        # rows ~ 1e-4, and its rank cut no longer drops the masses (the bullet bounced off a 'fixed' pendulum)
+        D = np.concatenate(saddle.balance(M, K[n:, :n]))
+        sol = D * np.linalg.lstsq(D[:, None] * K * D, D * rhs, rcond=None)[0]
         if s and np.linalg.norm(K @ sol - rhs) > 1e-9 * (np.linalg.norm(rhs) + np.linalg.norm(K) * np.linalg.norm(sol)):
             return None  # sticking is kinematically impossible here (more velocity conditions than freedoms)
         u_after = sol[:n]
@@ -449,8 +453,12 @@ def joint_impulses(model: MechanicalModel, q: np.ndarray, u_before: np.ndarray, 
         links = subtree(j.link)
         if unknown and any(moves_with_unknown(x) for x in links):
             continue
+        terms = [momentum.get(x, np.zeros(3)) for x in links] + [external.get(x, np.zeros(3)) for x in links]
         total = sum((momentum.get(x, np.zeros(3)) - external.get(x, np.zeros(3)) for x in links), np.zeros(3))
-        result[j.link] = [float(x) if abs(x) > 1e-12 * (1 + np.max(np.abs(total))) else 0.0 for x in total]
+        # rounding is relative to the momenta and impulses whose difference the total is (against 1 N s, a MEMS
+        # pendulum's 4.5e-13 N s hinge impulse was printed as 0)
+        scale = max(float(np.max(np.abs(terms), initial=0.0)), 1e-300)
+        result[j.link] = [float(x) if abs(x) > 1e-12 * scale else 0.0 for x in total]
     return result
 
 

@@ -27,7 +27,7 @@ def _pressed(rhs, t: float, q: np.ndarray, u: np.ndarray, trial: list[int], step
         try:
             acc, lam = rhs.accelerations(t, q, u)
             lam = lam[-len(trial):]
-            tol = 1e-12 * max(1.0, float(np.max(np.abs(lam))))
+            tol = 1e-12 * _force_scale(rhs, t, q, u, lam)
             if np.all(lam > tol):
                 return trial
             if np.all(lam >= -tol):
@@ -43,10 +43,16 @@ def _pressed(rhs, t: float, q: np.ndarray, u: np.ndarray, trial: list[int], step
 
 
 def _round_off(rhs, t: float, q: np.ndarray, u: np.ndarray, lam: np.ndarray) -> float:
-    """What multipliers below count as zero: 1e-9 of the forces at play (the generalized forces, the multipliers;
-    at least 1): the balls of a Newton's cradle at rest touch with forces of 1e-17, and are not pressed."""
+    """What multipliers below count as zero: 1e-9 of the forces at play: the balls of a Newton's cradle at rest
+    touch with forces of 1e-17, and are not pressed."""
+    return 1e-9 * _force_scale(rhs, t, q, u, lam)
+
+
+def _force_scale(rhs, t: float, q: np.ndarray, u: np.ndarray, lam: np.ndarray) -> float:
+    """The forces at play: the largest generalized force or multiplier, in the model's units (a floor of 1 N
+    called a MEMS ball's 1e-13 N weight on the floor 'not pressed', and the ball fell through it)."""
     f = rhs.c.eqs.evaluate(t, q, u, rhs.p)[1]
-    return 1e-9 * max(1.0, float(np.max(np.abs(f), initial=0.0)), float(np.max(np.abs(lam), initial=0.0)))
+    return max(float(np.max(np.abs(f), initial=0.0)), float(np.max(np.abs(lam), initial=0.0)), 1e-300)
 
 
 def _soon(rhs, t: float, q: np.ndarray, u: np.ndarray, acc: np.ndarray, step: float) -> np.ndarray:
@@ -277,7 +283,7 @@ def integrate_with_impacts(job: Integration, y0: np.ndarray, capture_velocity: f
             trial = [c.gap_names.index(x) for x in touching]
             rhs.persistent.extend(trial)
             lam = rhs.accelerations(t, q, u_new)[1][-len(trial):]
-            if np.all(lam > 1e-12 * max(1.0, float(np.max(np.abs(lam))))):
+            if np.all(lam > 1e-12 * _force_scale(rhs, t, q, u_new, lam)):
                 captured = True
                 rhs.rested.update(trial)
             else:

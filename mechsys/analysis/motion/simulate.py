@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING, Any, Callable
 import numpy as np
 
 from mechsys.errors import AnalysisError, InputError
+from mechsys.numeric import saddle
 from mechsys.numeric.native import BUDGET_SPENT, budget_spent
 
 if TYPE_CHECKING:  # sympy and the model are imported only where used: a warm run (motion/warm.py) needs neither
@@ -334,13 +335,9 @@ class RightHandSide:
             A = np.vstack([A, self.c.gap_A(t, q, u, self.p)[self.persistent]])
             b = np.concatenate([b, self.c.gap_b(t, q, u, self.p).ravel()[self.persistent]])
         n, m = self.c.n, A.shape[0]
-        K = np.zeros((n + m, n + m))
-        K[:n, :n], K[:n, n:], K[n:, :n] = M, A.T, A
-        rhs = np.concatenate([f, b])
-        if not (np.all(np.isfinite(K)) and np.all(np.isfinite(rhs))):  # an overflow or a domain error: the
+        if not all(np.all(np.isfinite(x)) for x in (M, A, f, b)):  # an overflow or a domain error: the
             return np.full(n, np.nan), np.full(m, np.nan)  # integrator's step fails and reports t (no SVD of nan)
-        sol = np.linalg.lstsq(K, rhs, rcond=None)[0] if np.linalg.cond(K) > 1e14 else np.linalg.solve(K, rhs)
-        return sol[:n], -sol[n:]
+        return saddle.solve(M, A, f, b)  # in balanced units: the same at MEMS scale as in metres
 
     def _why_slow(self) -> str:
         """budget_spent's causes, or, for an implicit method where the fast motion here only decays (no eigenvalue
