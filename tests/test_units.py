@@ -95,3 +95,14 @@ def test_the_four_bar_has_its_four_rests_at_any_scale(scale):
         assert b["coordinates"] == pytest.approx(a["coordinates"], abs=1e-9) and a["stability"] == b["stability"]
         assert sorted(abs(complex(*v)) for v in b["eigenvalues"]) == \
             pytest.approx(sorted(abs(complex(*v)) for v in a["eigenvalues"]), rel=1e-7)
+
+
+def test_info_of_a_mems_rolling_disk_is_the_metre_one():
+    """The rolling disk at MEMS scale: m = 2e-9 kg on its translations beside m r^2 = 2e-18 kg m^2 on its angles.
+    The mass matrix is regular at every scale (a disk has mass and inertia in every coordinate), but `info`
+    said 'the mass matrix is singular' at MEMS scale, its rank taken at 1e-9 of the largest entry across units."""
+    L, M = SCALES["mems"]
+    metre = _run("info", SYSTEMS_DIR / "rolling_disk.yaml")
+    scaled = _run("info", SYSTEMS_DIR / "rolling_disk.yaml", *_sets(m=2.0 * M, r=0.3 * L, g=9.81 * L))
+    assert scaled["notes"] == metre["notes"] == [] and scaled["massless_coordinates"] == []
+    assert (scaled["dof"], scaled["constraint_rank"]) == (metre["dof"], metre["constraint_rank"])

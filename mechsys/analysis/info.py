@@ -8,7 +8,7 @@ from mechsys.analysis.facts import Info, JointRow
 from mechsys.errors import AnalysisError
 from mechsys.mechanics.dag import Evaluation
 from mechsys.mechanics.model import INTERNAL_METHOD, MechanicalModel
-from mechsys.numeric import cache
+from mechsys.numeric import cache, saddle
 from mechsys.numeric.lambdify import matrix_source
 from mechsys.numeric.runtime import matrix_from_source
 
@@ -142,7 +142,8 @@ def system_info(model: MechanicalModel) -> Info:
                                 "check the parameter values, e.g. a mass of 1e200 squared)")
         massless = [c for i, c in enumerate(model.coordinates)  # relative to M's own scale, as _rank
                     if all(abs(M[i, i]) <= 1e-12 * float(np.max(np.abs(M))) for M in Ms)]
-        if _rank(Ms[0]) < nfree:
+        dq = saddle.balance(Ms[0], np.zeros((0, nfree)))[0]  # each coordinate in its own units: a disk's
+        if _rank(dq[:, None] * Ms[0] * dq) < nfree:  # m = 2e-9 kg beside m r^2 = 2e-18 kg m^2 is not singular
             notes.append("the mass matrix is singular (massless coordinates need condensation or constraints)")
     dof_formula = mobility - len(prescribed)
     redundant = max(0, len(kin.constraints) - rank)
