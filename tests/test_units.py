@@ -26,6 +26,15 @@ def _sets(**values) -> list[str]:
     return [x for name, value in values.items() for x in ("--set", f"{name}={value!r}")]
 
 
+def _four_bar(command: str, scale: str) -> tuple[dict, dict]:
+    """`command` on systems/four_bar.yaml as bundled and with its bars, masses and g scaled (T kept)."""
+    L, M = SCALES[scale]
+    path = SYSTEMS_DIR / "four_bar.yaml"
+    lengths = {k: v * L for k, v in {"l1": 0.4, "l2": 0.1, "l3": 0.35, "l4": 0.3}.items()}
+    masses = {k: v * M for k, v in {"m2": 0.5, "m3": 1.2, "m4": 1.0}.items()}
+    return _run(command, path), _run(command, path, *_sets(**lengths, **masses, g=9.81 * L))
+
+
 @pytest.mark.parametrize("scale", SCALES)
 def test_the_bullet_and_pendulum_impact_at_any_scale(scale):
     """The bullet (m2, v) strikes the pendulum (IO about the hinge) at rC with restitution e: omega = m2 v rC (1 + e)
@@ -66,11 +75,7 @@ def test_inverse_dynamics_of_the_four_bar_at_any_scale(scale):
     q'' = 1e-27 (the constrained equations were solved by least squares in mixed units: M ~ 1e-17 beside A ~ 1e-4),
     and at the large scale -9.55 instead of -37.0."""
     L, M = SCALES[scale]
-    path = SYSTEMS_DIR / "four_bar.yaml"
-    metre = _run("inverse", path)
-    lengths = {k: v * L for k, v in {"l1": 0.4, "l2": 0.1, "l3": 0.35, "l4": 0.3}.items()}
-    masses = {k: v * M for k, v in {"m2": 0.5, "m3": 1.2, "m4": 1.0}.items()}
-    scaled = _run("inverse", path, *_sets(**lengths, **masses, g=9.81 * L))
+    metre, scaled = _four_bar("inverse", scale)
     assert metre["accelerations"]["theta2"] == pytest.approx(-36.997075487, rel=1e-9)
     for name, value in metre["accelerations"].items():
         assert scaled["accelerations"][name] == pytest.approx(value, rel=1e-9)
@@ -84,12 +89,7 @@ def test_the_four_bar_has_its_four_rests_at_any_scale(scale):
     """The four-bar's rests and their eigenvalues do not depend on the units (T kept). At MEMS scale (forces of
     1e-17 N m beside loop rows of 1e-5 m) two of the four were found and the equilibria were called 'not
     isolated': the deflated Newton stopped at its starts, and the continuum test saw no stiffness."""
-    L, M = SCALES[scale]
-    path = SYSTEMS_DIR / "four_bar.yaml"
-    metre = _run("equilibria", path)
-    lengths = {k: v * L for k, v in {"l1": 0.4, "l2": 0.1, "l3": 0.35, "l4": 0.3}.items()}
-    masses = {k: v * M for k, v in {"m2": 0.5, "m3": 1.2, "m4": 1.0}.items()}
-    scaled = _run("equilibria", path, *_sets(**lengths, **masses, g=9.81 * L))
+    metre, scaled = _four_bar("equilibria", scale)
     assert len(metre["equilibria"]) == len(scaled["equilibria"]) == 4 and "not isolated" not in scaled["message"]
     for a, b in zip(metre["equilibria"], scaled["equilibria"]):
         assert b["coordinates"] == pytest.approx(a["coordinates"], abs=1e-9) and a["stability"] == b["stability"]
