@@ -10,8 +10,9 @@ of the whole package and the versions of sympy, numpy and scipy (a printer or a 
 and for the numeric commands the C compilers used (none, or MECHSYS_NATIVE=off: the Python path, whose last digits
 may differ; and the quick compiler of the straight-line programs). Entries are signed like every cache entry
 (numeric/cache.py) and checked for their shape. An output is kept only when the model was loaded from the text its
-key hashed (`loaded`: a file saved during the command keeps nothing). Commands that fail, that verify or draw (`derive --check`,
-`equilibria --verify`, `--plot`) and runs with the cache off are never stored or read. Imports nothing heavy."""
+key hashed (`loaded`: a file saved during the command keeps nothing). Commands that fail, that verify or draw
+(`derive --check`, `equilibria --verify`, `--plot`) and runs with the cache off are never stored or read. Imports
+nothing heavy."""
 from __future__ import annotations
 
 import hashlib

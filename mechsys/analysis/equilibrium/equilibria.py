@@ -552,11 +552,11 @@ def _is_root(problem: EquilibriumProblem, z: np.ndarray, p: np.ndarray) -> bool:
     """F(z) vanishes to 1e-10 of the Jacobian's largest entry (at least 1), and Newton's step from z is below 1e-4
     (1 + |z|): the acceptance of every root. A row or an unknown smaller than 1 where the search looks is measured
     in its own size (equation_scales): a MEMS linkage's rest equations are 1e-12 N m and its multipliers 1e-8 N,
-    and against a floor of 1 N m every configuration on its loop passed F = 0. The step test drops the zeros at infinity of a force
-    that only tends to 0 (1/x at x = 1e20: F = 1e-20 passed, but Newton's step there doubles x). An F above
-    rounding (1e-13 of that scale) must also be one Newton's linear model can reduce: near a loop's dead point the
-    multipliers reach 1e4 and J's scale with them, and Newton stalls at |F| ~ 1e-7 where J is singular, in no
-    root's basin."""
+    and against a floor of 1 N m every configuration on its loop passed F = 0. The step test drops the zeros at
+    infinity of a force that only tends to 0 (1/x at x = 1e20: F = 1e-20 passed, but Newton's step there doubles
+    x). An F above rounding (1e-13 of that scale) must also be one Newton's linear model can reduce: near a loop's
+    dead point the multipliers reach 1e4 and J's scale with them, and Newton stalls at |F| ~ 1e-7 where J is
+    singular, in no root's basin."""
     rows, sizes = (np.minimum(s, 1.0) for s in equation_scales(problem, p))  # (never looser than at unit size)
     F = problem.F(z, p) / rows
     J = problem.J(z, p) / rows[:, None] * sizes  # in the unknowns' own sizes
