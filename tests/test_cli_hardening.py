@@ -356,7 +356,9 @@ def test_overflowing_linearizations_are_reasoned_not_internal_errors(tmp_path):
     """A slider-crank whose rod is 1e200 long (found by the CLI fuzz, seed 20261126161154): its mass matrix
     overflows. codegen's regularity check evaluated the generated code with Python's raising float arithmetic
     (OverflowError, an internal error); the stability of an equilibrium ran an SVD on infinities (LinAlgError).
-    Now codegen and modes refuse with one line, and equilibria reports the equilibrium undecided, saying why."""
+    Now codegen and modes refuse with one line, and equilibria reports the equilibrium undecided, saying why. The
+    crank is held (w = 0) for modes and equilibria: driven, the model is non-autonomous and has no equilibria (the
+    overflow had hidden that: d/dt of its equations was inf and compared as 0)."""
     text = (ROOT / "tests" / "data" / "crank_past_its_limit.yaml").read_text()
     text = text.replace("b: 0.16", "b: 1.0e+200").replace("{initial: -asin(a*sin(th0)/b), rate: 0}",
                                                            "{initial: 0.1, rate: 0}")
@@ -366,8 +368,9 @@ def test_overflowing_linearizations_are_reasoned_not_internal_errors(tmp_path):
     line = one_line(invoke("codegen", model, "-t", "c", "-m", "kane", "-o", tmp_path / "package", "--set", "m=0"), 1)
     assert "singular" in line
     for extra in ([], ["--set", "m=0"]):
-        assert "not finite" in one_line(invoke("modes", model, *extra), 1)
-    result = invoke("equilibria", model, "--set", "m=0", "-f", "json")
+        assert "not finite" in one_line(invoke("modes", model, "--set", "w=0", *extra), 1)
+    assert "non-autonomous" in one_line(invoke("equilibria", model, "--set", "m=0"), 1)
+    result = invoke("equilibria", model, "--set", "m=0", "--set", "w=0", "-f", "json")
     assert result.exit_code == 0, result.output
     verdicts = {(e["stability"], e["reason"].split(" (")[0]) for e in json.loads(result.stdout)["equilibria"]}
     assert ("undecided", "the linearized equations are not finite here") in verdicts

@@ -243,10 +243,17 @@ def test_parameters_that_overflow_the_equations_are_one_reasoned_line(command, t
 def test_generated_code_with_boolean_constants_is_accepted(tmp_path):
     """Found by the rotating-seed fuzz: native_functions with k = 1e15 makes sympy print `False` (and can print
     float('nan')) in generated source, which the arithmetic-only check refused with an internal error. `modes`
-    now ends in its own reasoned message."""
+    now ends in its own reasoned message. The forcing's t is replaced by x: with t the model is non-autonomous and
+    `modes` says so before any code is generated (the stiff spring had hidden that: d/dt of f, 3, was compared with
+    1e-9 of the spring's 1e15)."""
     text = (Path(__file__).resolve().parent / "data" / "native_functions.yaml").read_text()
     path = tmp_path / "stiff.yaml"
-    path.write_text(text.replace("parameters: {m: 1.5, k: 40,", "parameters: {m: 1.5, k: 1000000000000000.0,"))
+    stiff = text.replace("parameters: {m: 1.5, k: 40,", "parameters: {m: 1.5, k: 1000000000000000.0,")
+    path.write_text(stiff)
+    assert "non-autonomous" in analysis_error("modes", path, "-f", "json")
+    for old, new in (("3*sin(2*t)", "3*sin(2*x)"), ("0.5*cos(t)", "0.5*cos(x)"), ("exp(-t)", "exp(-x)")):
+        stiff = stiff.replace(old, new)
+    path.write_text(stiff)
     err = analysis_error("modes", path, "-f", "json")
     assert "no equilibrium found to vibrate about" in err
 

@@ -67,10 +67,11 @@ def pencil_eigenvalues(problem: EquilibriumProblem, e: Equilibrium) -> np.ndarra
     return eigen(A, B, pencil_positions(problem, N))[0]
 
 
-def eigen(A: np.ndarray, B: np.ndarray, positions: int) -> tuple[np.ndarray, np.ndarray | None]:
+def eigen(A: np.ndarray, B: np.ndarray, positions: int = 0) -> tuple[np.ndarray, np.ndarray | None]:
     """Finite eigenvalues of the pencil (massless coordinates give infinite ones, dropped) and the Jacobian. Whether
     B is singular is judged on the balanced pencil (a picometre linkage's M ~ 1e-24 beside the identity's 1s is
-    regular), and its QZ eigenvalues are the balanced ones scaled back."""
+    regular), and its QZ eigenvalues are the balanced ones scaled back. ``positions``: reduced_pencil's rows q' = u
+    (pencil_positions); 0 balances any pencil as a whole."""
     Ab, Bb, w = _balanced(A, B, positions)
     try:
         if np.linalg.cond(Bb) > 1e12:
