@@ -441,8 +441,8 @@ def _newton(problem: EquilibriumProblem, z: np.ndarray, p: np.ndarray, roots: li
     """Deflated Newton (Farrell et al.): roots already found repel the iteration; backtracking on |G|. A problem
     with compiled pieces runs the same loop as compiled code (numeric/newton.c)."""
     n = len(z)
-    rows, sizes = equation_scales(problem, p)
-    unit = bool(np.all((rows >= 1e-6) & (rows <= 1e6)) and np.all((sizes >= 1e-6) & (sizes <= 1e6)))
+    rows, sizes = newton_scales(problem, p)
+    unit = rows.size == 1  # (the compiled loop takes F and J as they are)
     compiled = getattr(problem, "compiled_newton", None) if unit else None
     run = compiled(p) if compiled is not None else None
     if run is not None:
@@ -480,8 +480,8 @@ def _newton(problem: EquilibriumProblem, z: np.ndarray, p: np.ndarray, roots: li
 
     stalls = 0
     for _ in range(max_iter):
-        # each row and unknown in its own size (equation_scales; ones at ordinary units, where the compiled loop
-        # runs): at MEMS scale the force rows (1e-17 N m) beside the loop rows (1e-5 m) left Newton at its starts
+        # each row and unknown in its own size where they are far from 1 (newton_scales): at MEMS scale the force
+        # rows (1e-17 N m) beside the loop rows (1e-5 m) left Newton at its starts
         F = problem.F(z, p) / rows
         J = problem.J(z, p) / rows[:, None]
         mu, grad_log = deflation(z)
@@ -530,14 +530,14 @@ def _wrap(d: np.ndarray) -> np.ndarray:
 def _polish(problem: EquilibriumProblem, z: np.ndarray, p: np.ndarray) -> np.ndarray | None:
     """Plain Newton to full accuracy, then accept only a genuine zero of F; entries within rounding of 0 are set
     to 0 where that is a root as well (Newton's last step leaves -2.35e-38 where the root is at 0)."""
-    rows, sizes = equation_scales(problem, p)
+    rows, sizes = newton_scales(problem, p)
     for _ in range(8):
         F = problem.F(z, p)
         J = problem.J(z, p)
         if not (np.all(np.isfinite(F)) and np.all(np.isfinite(J))):
             return None
-        # in the equations' and unknowns' own sizes: least squares weighs a MEMS loop's 1e-12 N m force rows
-        # as its 1e-4 m loop rows, and its rank cut sees the redundant rows' rounding as rounding
+        # in the equations' and unknowns' own sizes where they are far from 1: least squares weighs a MEMS loop's
+        # 1e-12 N m force rows as its 1e-4 m loop rows (and a 1 km four-bar's 1e10 N m ones as its 1e3 m ones)
         step = sizes * np.linalg.lstsq(J / rows[:, None] * sizes, -F / rows, rcond=None)[0]
         z = z + step
         if np.linalg.norm(step, np.inf) < 1e-14 * (1 + np.linalg.norm(z, np.inf)):
@@ -557,7 +557,7 @@ def _is_root(problem: EquilibriumProblem, z: np.ndarray, p: np.ndarray) -> bool:
     x). An F above rounding (1e-13 of that scale) must also be one Newton's linear model can reduce: near a loop's
     dead point the multipliers reach 1e4 and J's scale with them, and Newton stalls at |F| ~ 1e-7 where J is
     singular, in no root's basin."""
-    rows, sizes = (np.minimum(s, 1.0) for s in equation_scales(problem, p))  # (never looser than at unit size)
+    rows, sizes = small_scales(problem, p)
     F = problem.F(z, p) / rows
     J = problem.J(z, p) / rows[:, None] * sizes  # in the unknowns' own sizes
     scale = max(1.0, float(np.max(np.abs(J)))) if J.size else 1.0
@@ -570,6 +570,23 @@ def _is_root(problem: EquilibriumProblem, z: np.ndarray, p: np.ndarray) -> bool:
         return False  # above rounding, and no step reduces F: a minimum of |F| where J is singular, not a zero
     step = step * sizes
     return bool(np.max(np.abs(step), initial=0.0) <= 1e-4 * (1 + float(np.max(np.abs(z), initial=0.0))))
+
+
+def newton_scales(problem: EquilibriumProblem, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """equation_scales where a row or unknown lies outside [1e-6, 1e6] (a MEMS or a 1 km linkage), else single
+    ones: at ordinary units Newton and its polish run on F and J as they are (and their roots to the last digit)."""
+    rows, sizes = equation_scales(problem, p)
+    if np.all((rows >= 1e-6) & (rows <= 1e6)) and np.all((sizes >= 1e-6) & (sizes <= 1e6)):
+        return np.ones(1), np.ones(1)
+    return rows, sizes
+
+
+def small_scales(problem: EquilibriumProblem, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """equation_scales capped at 1: rows and unknowns smaller than 1 in their own sizes, the others as they are
+    (so a model at ordinary units is judged and polished exactly as before, and a degenerate root, where J
+    vanishes, is not measured against the size J has elsewhere)."""
+    rows, sizes = equation_scales(problem, p)
+    return np.minimum(rows, 1.0), np.minimum(sizes, 1.0)
 
 
 def equation_scales(problem: EquilibriumProblem, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -1049,7 +1066,7 @@ def _motions(problem: EquilibriumProblem, z: np.ndarray, p: np.ndarray) -> np.nd
         return np.zeros((0, len(z)))
     # first in the equations' and unknowns' own sizes: one pass of unit columns and rows leaves a MEMS four-bar's
     # stiffness (1e-17 N m beside its loop rows' 1e-5 m) at 1e-12 and called its equilibria 'not isolated'
-    rows, sizes = equation_scales(problem, p)
+    rows, sizes = small_scales(problem, p)
     J = J / rows[:, None] * sizes
     columns = np.linalg.norm(J, axis=0)
     columns[columns == 0] = 1.0  # a zero column: its unit vector is a null vector either way
