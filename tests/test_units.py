@@ -11,6 +11,7 @@ import pytest
 from typer.testing import CliRunner
 
 from mechsys.cli import app
+from tests import reference_nonholonomic as ref
 from tests.helpers import SYSTEMS_DIR
 
 SCALES = {"mems": (1e-4, 1e-9), "large": (1e3, 1e6)}
@@ -106,3 +107,27 @@ def test_info_of_a_mems_rolling_disk_is_the_metre_one():
     scaled = _run("info", SYSTEMS_DIR / "rolling_disk.yaml", *_sets(m=2.0 * M, r=0.3 * L, g=9.81 * L))
     assert scaled["notes"] == metre["notes"] == [] and scaled["massless_coordinates"] == []
     assert (scaled["dof"], scaled["constraint_rank"]) == (metre["dof"], metre["constraint_rank"])
+
+
+@pytest.mark.parametrize("scale", SCALES)
+def test_the_steady_turns_of_a_rolling_disk_at_any_scale(scale):
+    """The rolling disk's steady turns at yaw rate 0.5 rad/s and spin 1/r (the file's) scaled with its speed: the
+    leans solve the steady-turning condition (tests/reference_nonholonomic.py, a closed form), which depends on
+    g/r only, so they and their eigenvalues are the metre disk's. At MEMS scale `equilibria` listed 50 'steady
+    motions', one per start, its rows and multipliers (1e-18 kg m^2, 1e-13 N) judged against 1; at both scales the
+    family's zero eigenvalue was left in ('undecided' where the metre disk is stable)."""
+    L, M = SCALES[scale]
+    path = SYSTEMS_DIR / "rolling_disk.yaml"
+    metre = _run("equilibria", path)
+    m, r, g = 2.0 * M, 0.3 * L, 9.81 * L
+    scaled = _run("equilibria", path, *_sets(m=m, r=r, g=g), "--set", f"der(x)={L!r}",
+                  "--set", f"der(spin)={1 / 0.3!r}")
+    assert len(metre["equilibria"]) == len(scaled["equilibria"]) == 2
+    for a, b in zip(metre["equilibria"], scaled["equilibria"]):
+        lean = b["coordinates"]["lean"]
+        residual = ref.steady_turning_residual(m, r, m * r * r / 2, m * r * r / 4, g, lean, 1 / 0.3, 0.5)
+        assert abs(residual) < 1e-10 * m * r * r  # in units of m r^2 (1/s^2)
+        assert lean == pytest.approx(a["coordinates"]["lean"], abs=1e-9)
+        assert a["stability"] == b["stability"] == "stable"
+        assert sorted(abs(complex(*v)) for v in b["eigenvalues"]) == \
+            pytest.approx(sorted(abs(complex(*v)) for v in a["eigenvalues"]), rel=1e-7)

@@ -827,7 +827,8 @@ class _LinearizationSetup(ctypes.Structure):
                                                    "nfam", "nt", "hfirst")]
                 + [("rtol", ctypes.c_double)]
                 + [(name, ctypes.c_void_p) for name in ("I", "D", "keep", "elim", "rows_q", "cols_all", "cols_ign",
-                                                        "jindex", "jsign", "rhs", "tsrc", "tone")])
+                                                        "jindex", "jsign", "rhs", "tsrc", "tone", "rinv",
+                                                        "zsize")])
 
 
 class CompiledLinearization:
@@ -836,13 +837,16 @@ class CompiledLinearization:
     jac (where dE/d(q, u) starts in the output), hfirst (the holonomic rows' first row); ``lists``: the index lists
     I, D, keep, elim, rows_q, cols_all, cols_ign; ``index``, ``sign``: dE/dz gathered from the output (size x nz);
     ``rhs``: the families' columns (nfam x size, indices into the output); ``tsrc`` (nt: how a family's direction
-    is read from its dz, the same for all) and ``tone`` (nfam: its entry set to 1). Called with the output followed by a zero: (status, Jw, Mr, Kf, Cf, deflated,
-    which families were deflated); status 0 ok, else newton.c's code and the arrays None."""
+    is read from its dz, the same for all) and ``tone`` (nfam: its entry set to 1); ``scales``: (rows, sizes) of
+    equation_scales, in which a family's direction is solved (None: ones). Called with the output followed by a
+    zero: (status, Jw, Mr, Kf, Cf, deflated, which families were deflated); status 0 ok, else newton.c's code and
+    the arrays None."""
 
     _LISTS = ("I", "D", "keep", "elim", "rows_q", "cols_all", "cols_ign")
 
     def __init__(self, lib: ctypes.CDLL, *, sizes: dict, lists: dict, index: np.ndarray, sign: np.ndarray,
-                 rhs: np.ndarray, tsrc: np.ndarray, tone: np.ndarray, rtol: float, full_size: int) -> None:
+                 rhs: np.ndarray, tsrc: np.ndarray, tone: np.ndarray, rtol: float, full_size: int,
+                 scales: tuple[np.ndarray, np.ndarray] | None = None) -> None:
         self._fn = lib.mechsys_linearize
         n, m, size = sizes["n"], sizes["m"], sizes["size"]
         k = {name: np.ascontiguousarray(lists[name], dtype=np.intc) for name in self._LISTS}
@@ -850,6 +854,9 @@ class CompiledLinearization:
                  rhs=np.ascontiguousarray(rhs, dtype=_LONG).reshape(-1, size),
                  tsrc=np.ascontiguousarray(tsrc, dtype=np.intc), tone=np.ascontiguousarray(tone, dtype=np.intc))
         nz = k["jindex"].shape[1] if k["jindex"].ndim == 2 else 0
+        rows, zsize = scales if scales is not None else (np.ones(1), np.ones(1))
+        k.update(rinv=np.ascontiguousarray(np.broadcast_to(1.0 / np.asarray(rows, dtype=float), (size,))),
+                 zsize=np.ascontiguousarray(np.broadcast_to(np.asarray(zsize, dtype=float), (max(nz, 1),))))
         nfam, nxi, nI = len(k["tone"]), len(k["rows_q"]), len(k["I"])
         nt = nxi + nI
         ok = (k["jindex"].shape == (size, nz) and k["rhs"].shape == (nfam, size) and k["tsrc"].shape == (nt,)
@@ -868,7 +875,7 @@ class CompiledLinearization:
         self._setup = _LinearizationSetup(n, m, sizes["mh"], size, sizes["jac"], nI, len(k["keep"]), nxi,
                                           len(k["cols_ign"]), nz, nfam, nt, sizes["hfirst"], float(rtol),
                                           *(k[name].ctypes.data for name in (*self._LISTS, "jindex", "jsign", "rhs",
-                                                                             "tsrc", "tone")))
+                                                                             "tsrc", "tone", "rinv", "zsize")))
         self._work = np.empty(lib.mechsys_linearize_work(n, m, size, nz, nt))
         self._k = ctypes.c_int(0)
 

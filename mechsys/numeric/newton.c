@@ -498,6 +498,8 @@ typedef struct {
     const long *rhs;      /* nfam x size: raw index of the family's column of dE/du (a rate) or dE/dq */
     const int *tsrc;      /* nt: the unknown (index into z) each entry of a family's direction reads, -1: 0 */
     const int *tone;      /* nfam: the entry set to 1 (along the given rate or coordinate itself), -1: none */
+    const double *rinv;   /* size: 1 / each row's size, nz: each unknown's size (equation_scales; ones at */
+    const double *zsize;  /* ordinary units): a family's direction solved in the rows' and unknowns' own sizes */
 } lin_t;
 
 /* The smallest singular value of the square block (rows first.., columns cols) of the matrix at raw + offset
@@ -666,12 +668,14 @@ int mechsys_linearize(const lin_t *L, const double *raw, double *Jw, double *Mr,
     double *t = w; w += nt;
     size_t wide = L->size > nz ? L->size : nz;
     double *lwork = w; w += 2 * wide * wide + 2 * (L->size + nz);
-    for (int i = 0; i < L->size * nz; i++) Jz[i] = raw[L->jindex[i]] * L->jsign[i];
+    for (int i = 0; i < L->size * nz; i++)
+        Jz[i] = raw[L->jindex[i]] * L->jsign[i] * L->rinv[i / nz] * L->zsize[i % nz];
     for (int f = 0; f < L->nfam; f++) {
-        for (int i = 0; i < L->size; i++) col[i] = -raw[L->rhs[f * L->size + i]];
+        for (int i = 0; i < L->size; i++) col[i] = -raw[L->rhs[f * L->size + i]] * L->rinv[i];
         if (nz) {
             memcpy(Jc, Jz, sizeof(double) * L->size * nz);
             lstsq(Jc, L->size, nz, col, dz, lwork);
+            for (int j = 0; j < nz; j++) dz[j] *= L->zsize[j];
         }
         for (int e = 0; e < nt; e++) {
             int src = L->tsrc[e];

@@ -113,8 +113,8 @@ class EquilibriumProblem:
     rates of cyclic coordinates, which are unknowns (or fixed at their initial rate when the system leaves
     them free: a family of steady motions)."""
 
-    #: rows in residual_exprs' layout, each coordinate's then the constraints' (equation_scales measures each)
-    scaled_rows = True
+    #: (rows, unknowns) in consecutive blocks of one kind each, or None (equation_scales)
+    blocks: tuple[list[int], list[int]] | None = None
 
     def __init__(self, model: MechanicalModel) -> None:
         self.model = model
@@ -594,11 +594,9 @@ def equation_scales(problem: EquilibriumProblem, p: np.ndarray) -> tuple[np.ndar
     over the file's initial state and four random starts of the default boxes, each as the search starts it (on
     the constraints, rates solved, multipliers guessed; a start near a loop's dead point has huge multipliers).
     An unknown's size is its |z_j| (an angle's at least 1, 1 where it is 0), a row's the largest of |F_i| and
-    |dF_i/dz_j| times the sizes (the largest row's for a fixed-rate cyclic coordinate's row, which vanishes at
-    rest; 1 when a row vanishes at every start). Remembered per parameter values. A problem whose rows are not
-    laid out as residual_exprs (scaled_rows False) gets single ones, which leave F and J as they are."""
-    if not problem.scaled_rows:
-        return np.ones(1), np.ones(1)  # (broadcast: F and J as they are)
+    |dF_i/dz_j| times the sizes (the largest dynamics row's for a fixed-rate cyclic coordinate's row, which
+    vanishes at rest; 1 when a row vanishes at every start). Remembered per parameter values. The first rows are each
+    coordinate's (residual_exprs', and the nonholonomic problem's dynamics rows)."""
     memo = problem.__dict__.setdefault("_equation_scales", {})
     key = np.asarray(p, dtype=float).tobytes()
     if key not in memo:
@@ -618,17 +616,58 @@ def equation_scales(problem: EquilibriumProblem, p: np.ndarray) -> tuple[np.ndar
             if np.all(np.isfinite(F)) and np.all(np.isfinite(J)):
                 samples.append((z, F, J))
         size, sizes = np.zeros(problem.residual_count), np.ones(len(problem.unknowns))
-        if samples:
+        if samples and problem.blocks is not None:
+            size, sizes = _block_scales(problem, samples)
+        elif samples:
             sizes = np.median([np.abs(z) for z, _, _ in samples], axis=0)
             sizes = np.where(problem.is_angle(), np.maximum(sizes, 1.0), np.where(sizes > 0, sizes, 1.0))
             size = np.median([np.maximum(np.abs(F), np.max(np.abs(J) * sizes, axis=1, initial=0.0))
                               for _z, F, J in samples], axis=0)
         # the rows that vanish at rest whatever the state (a cyclic coordinate's whose rate is fixed: at rounding
         # of terms of any size) are measured against the largest row
+        largest = float(np.max(size[:problem.blocks[0][0]] if problem.blocks else size, initial=0.0))  # in N, N m
         for c in problem.fixed_rates:
-            size[problem.model.coordinates.index(c)] = float(np.max(size, initial=0.0))
+            size[problem.model.coordinates.index(c)] = largest
         memo[key] = np.where(size > 0, size, 1.0), sizes
     return memo[key]
+
+
+def _block_scales(problem: EquilibriumProblem, samples: list[tuple]) -> tuple[np.ndarray, np.ndarray]:
+    """equation_scales' (rows, sizes) for a problem whose rows and unknowns come in blocks of one kind each
+    (problem.blocks: the nonholonomic one, whose unknowns include rates solved from the constraints and
+    multipliers). A size at 1e-12 of its block's largest is rounding (a bicycle's der(y) heading along x, 1e-15).
+    An unknown without a size where the search starts (a multiplier or an acceleration that vanishes there) takes
+    its block's largest, else the one its column gives the rows it enters (the smallest row size / |dF_i/dz_j|),
+    else 1. A size of 1 for it made a MEMS disk's dynamics rows 1 N through their -A^T lambda terms."""
+    rows_blocks, unknown_blocks = problem.blocks
+    J = np.median([np.abs(J) for _z, _F, J in samples], axis=0)
+    F = np.median([np.abs(F) for _z, F, _J in samples], axis=0)
+    sizes = _rounding_as_zero(np.median([np.abs(z) for z, _, _ in samples], axis=0), unknown_blocks)
+    sizes = np.where(problem.is_angle(), np.maximum(sizes, 1.0), sizes)
+    start = 0
+    for length in unknown_blocks:
+        part = sizes[start:start + length]
+        part[part == 0] = float(np.max(part, initial=0.0))
+        start += length
+
+    def rows() -> np.ndarray:
+        return _rounding_as_zero(np.maximum(F, np.max(J * sizes, axis=1, initial=0.0)), rows_blocks)
+
+    size = rows()
+    for j in np.flatnonzero(sizes == 0):
+        enters = (J[:, j] > 0) & (size > 0)
+        sizes[j] = float(np.min(size[enters] / J[enters, j])) if np.any(enters) else 1.0
+    return rows(), sizes
+
+
+def _rounding_as_zero(values: np.ndarray, blocks: list[int]) -> np.ndarray:
+    """values with those at 1e-12 of their block's largest (blocks: consecutive lengths) set to 0."""
+    out, start = values.copy(), 0
+    for length in blocks:
+        part = out[start:start + length]
+        part[part <= 1e-12 * float(np.max(part, initial=0.0))] = 0.0
+        start += length
+    return out
 
 
 def settle(problem: EquilibriumProblem, z: np.ndarray, p: np.ndarray, max_steps: int = 400) -> np.ndarray | None:

@@ -30,7 +30,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import sympy as sp
 
-from mechsys.analysis.equilibrium.equilibria import Equilibrium, EquilibriumProblem, wrap
+from mechsys.analysis.equilibrium.equilibria import Equilibrium, EquilibriumProblem, newton_scales, wrap
 from mechsys.numeric.parameters import parameter_values
 from mechsys.errors import AnalysisError, InputError
 from mechsys.mechanics.dag import FreeSymbols, Substitution
@@ -393,8 +393,29 @@ class NonholonomicProblem(EquilibriumProblem):
     """The augmented steady-motion equations (see the module docstring) with the interface of EquilibriumProblem
     (multistart, continuation and sweeps use it unchanged)."""
 
-    #: its rows (dynamics, velocity constraints, accelerations) are taken as they are (equation_scales: ones)
-    scaled_rows = False
+    @cached_property
+    def residual_count(self) -> int:
+        """Its rows: dynamics (n, one per coordinate, as residual_exprs'), velocity constraints and their rates
+        (m each), holonomic constraints (mh); equation_scales measures each."""
+        return self.pieces.size
+
+    @property
+    def blocks(self) -> tuple[list[int], list[int]]:
+        """(rows, unknowns) in blocks of one kind each (equation_scales: a size at 1e-12 of its block's largest is
+        rounding): dynamics, velocity constraints, their rates, holonomic constraints; shape coordinates, free
+        rates, dependent rates, their rates, multipliers. A dependent rate solved where it vanishes (a bicycle's
+        der(y) heading along x) comes out at 1e-15, which is no size."""
+        nd = len(self.dependent_rates)
+        return [self.n, self.m, self.m, self.mh], [self.nq, len(self.rate_unknowns), nd, nd, self.m]
+
+    @cached_property
+    def deflation_scales(self) -> tuple[np.ndarray, np.ndarray]:
+        """(rows, sizes) in which a family's direction is solved (_deflate and newton.c's mechsys_linearize): the
+        equations' own sizes at the file's parameters where they are far from 1 (newton_scales), else ones. A MEMS
+        disk's dynamics rows (1e-18 kg m^2/s^2) beside its 3e-5 m constraint rows lost the direction in the least
+        squares, and its family's zero eigenvalue was left in ('undecided')."""
+        rows, sizes = newton_scales(self, parameter_values(self.model))
+        return np.broadcast_to(rows, (self.pieces.size,)).copy(), np.broadcast_to(sizes, (len(self.unknowns),)).copy()
 
     def __init__(self, model: MechanicalModel, given: list[str] | None = None, solve: list[str] | None = None,
                  independent: list[str] | None = None, method: str = "kane") -> None:
@@ -591,7 +612,7 @@ class NonholonomicProblem(EquilibriumProblem):
                                             rhs=np.array(rhs, dtype=int).reshape(-1, pieces.size),
                                             tsrc=np.array(tsrc, dtype=int),
                                             tone=np.array(tone, dtype=int), rtol=LINEARIZATION_RTOL,
-                                            full_size=pieces._full_size)
+                                            full_size=pieces._full_size, scales=self.deflation_scales)
 
     def _columns(self, v: dict) -> np.ndarray:
         """dE/dz from dE/dq, dE/du and the blocks of a and lambda (one gather from the point's raw output)."""
@@ -1032,7 +1053,9 @@ def _deflate(problem: NonholonomicProblem, e: Equilibrium, p: np.ndarray, Jw: np
     ix = problem._index
     rhs = np.column_stack([v["Eu"][:, ix[c]] for c in problem.fixed_rates]
                           + [v["Eq"][:, ix[c]] for c in problem.given])
-    dz = -np.linalg.lstsq(Jz, rhs, rcond=None)[0] if Jz.size else np.zeros((0, rhs.shape[1]))
+    rows, sizes = problem.deflation_scales
+    dz = -sizes[:, None] * np.linalg.lstsq(Jz / rows[:, None] * sizes, rhs / rows[:, None], rcond=None)[0] \
+        if Jz.size else np.zeros((0, rhs.shape[1]))
     tangents, families, undeflated = [], [], []
     scale = max(1.0, float(np.max(np.abs(Jw))))
     for j, name in enumerate(given):
