@@ -443,6 +443,13 @@ CASES: list[Case] = [
          append("constraints:\n  - type: point_on_line\n    point: arm.tip\n    through: ground\n"
                 "    direction: [sqrt(-1), 0, 1]\n"), "direction: [sqrt(-1)", None, "constraints[0].direction",
          ("real", "complex")),
+    # a product of inertia that makes T negative about an axis the arm turns about (x, and z with the column)
+    Case("inertia-negative-kinetic-energy", sub("      zz: I2z\n", "      zz: I2z\n      xz: 5\n"), "xx: I2x", None,
+         "links.arm.inertia", "kinetic energy would be negative"),
+    Case("constraint-name-twice",
+         append("constraints:\n  - {type: holonomic, name: k, expression: beta - 0.1}\n"
+                "  - {type: holonomic, name: k, expression: alpha - 0.2}\n"), Nth("name: k", 2), None,
+         "constraints[1].name", "duplicate constraint name"),
 ]
 
 

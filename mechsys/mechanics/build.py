@@ -5,6 +5,7 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
+import numpy as np
 import sympy as sp
 
 from mechsys.mechanics.dag import identically_zero
@@ -367,11 +368,40 @@ class Builder:
                 if spec.inertia_about == "origin":
                     # parallel-axis theorem: I_G = I_O - m (|c|^2 E - c c^T)
                     inertia = inertia - m * ((com.T * com)[0] * sp.eye(3) - com * com.T)
+                self.possible_inertia(inertia, name, ip, spec.inertia_about == "origin")
             elif spec.shape is not None:
                 inertia = self.shape_inertia(spec.shape, m, lp + ("shape",))
             if m == 0 and inertia == sp.zeros(3, 3):
                 continue
             self.kin.bodies.append(Body(name, m, com, inertia, spec.particle))
+
+    def possible_inertia(self, inertia: sp.Matrix, link: str, path: Path, about_origin: bool) -> None:
+        """An error when the central inertia tensor (with the file's parameter values) gives the link a negative
+        kinetic energy about an axis its joints let it turn about at the initial configuration. A tensor with
+        xx = yy = zz = 1 and xy = 5 on a ball joint made T negative along the motion. Only those axes count: a
+        planar model's {zz: I} given about the hinge has xx = -m d^2 about the centre of mass, never used."""
+        values: dict = {k: sp.Float(v) for k, v in self.doc.numeric_parameters().items()}
+        values.update({s: sp.Float(self.doc.initial.get(c, 0.0)) for c, s in self.doc.coords.items()})
+        try:
+            I = np.array(inertia.xreplace(values).evalf(), dtype=float)
+            W = self.kin.frames[link].omega.jacobian(list(self.doc.rates.values())).xreplace(values)
+            W = np.array(W.xreplace({x: 0 for x in W.free_symbols}).evalf(), dtype=float)  # t = 0
+        except (TypeError, ValueError, KeyError):
+            return  # not evaluated here (each entry was checked to be a finite real number)
+        if not (np.all(np.isfinite(I)) and np.all(np.isfinite(W))) or not W.size:
+            return
+        U, sv, _ = np.linalg.svd(W, full_matrices=False)
+        U = U[:, sv > 1e-9 * max(float(sv[0]), 1e-300)] if sv.size else U[:, :0]
+        if not U.shape[1]:
+            return
+        moments = np.linalg.eigvalsh(U.T @ ((I + I.T) / 2) @ U)
+        scale = max(float(np.max(np.abs(np.linalg.eigvalsh((I + I.T) / 2)))), 1e-300)
+        if moments[0] >= -1e-12 * scale:
+            return
+        where = " about the centre of mass (the tensor given about the origin minus m (|c|² E − c cᵀ))" \
+            if about_origin else ""
+        raise self.doc.error(path, f"is not the inertia of a body: its moment{where} about an axis the link turns "
+                                   f"about is {moments[0]:.6g}, and the kinetic energy would be negative")
 
     def shape_inertia(self, shape: Any, m: sp.Expr, path: Path) -> sp.Matrix:
         given = [k for k in ("rod", "disk", "cylinder", "sphere", "box") if getattr(shape, k) is not None]
@@ -406,9 +436,13 @@ class Builder:
             phi = self.doc.coords[name] - motion
             self.kin.constraints.append(ConstraintRow(f"drive({name})", "holonomic", phi, self.rate_of(phi)))
             self.kin.constraint_elements.append(("drive", 1))
+        names: set[str] = set()
         for i, c in enumerate(self.doc.spec.constraints):
             cp: Path = ("constraints", i)
             name = c.name or f"{c.type}_{i + 1}"
+            if name in names:  # its multipliers would be one row in the output and one multiplier(name)
+                raise self.doc.error(cp + ("name",) if c.name else cp, f"duplicate constraint name {name!r}")
+            names.add(name)
             rows: list[ConstraintRow] = []
             if c.type == "holonomic":
                 phi = self.doc.parse(c.expression, cp + ("expression",))
