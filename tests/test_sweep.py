@@ -149,6 +149,23 @@ def test_worker_compiles_once_and_rechecks_values_per_task(tmp_path, monkeypatch
                                                    rel=1e-12, abs=1e-12)
 
 
+def test_a_task_whose_inertia_makes_the_kinetic_energy_negative_fails_as_a_fresh_load_does(tmp_path):
+    """A ball-jointed body with xx = yy = zz = 1 and xy = c: its moments are 1 - c, 1, 1 + c, so c = 2.5 gives
+    T < 0 about (1, 1, 0)/sqrt(2); `sweep` ran it 'ok' with a negative T, where `--set c=2.5` is refused."""
+    model = tmp_path / "top.yaml"
+    model.write_text("name: top\nparameters: {m: 1, c: 0}\ncoordinates:\n  a1: {initial: 0.1, rate: 1}\n"
+                     "  a2: {initial: 0.2, rate: 0.5}\n  a3: {initial: 0.3, rate: 2}\nlinks:\n  body:\n"
+                     "    joint: {type: spherical, parent: ground, coordinates: [a1, a2, a3]}\n    mass: m\n"
+                     "    inertia: {xx: 1, yy: 1, zz: 1, xy: c}\n")
+    spec = sw.SweepSpec(str(model), model.read_text(), (), "info", {}).payload()
+    results = sw.run_chunk(spec, list(enumerate([{"c": 0.5}, {"c": 2.5}])))
+    assert [r["status"] for r in results] == ["ok", "failed"]
+    assert results[1]["error"] == ("links.body.inertia: its moment about an axis the link turns about is -1.5: the "
+                                   "kinetic energy would be negative")
+    fresh = CliRunner().invoke(app, ["info", str(model), "--set", "c=2.5"])
+    assert fresh.exit_code == 2 and "-1.5, and the kinetic energy would be negative" in fresh.output
+
+
 def test_workers_get_the_model_text_not_only_its_path(tmp_path):
     """A worker on another machine has no copy of the file: the text travels with the tasks."""
     text = (SYSTEMS / "motor_arm.yaml").read_text()

@@ -376,32 +376,16 @@ class Builder:
             self.kin.bodies.append(Body(name, m, com, inertia, spec.particle))
 
     def possible_inertia(self, inertia: sp.Matrix, link: str, path: Path, about_origin: bool) -> None:
-        """An error when the central inertia tensor (with the file's parameter values) gives the link a negative
-        kinetic energy about an axis its joints let it turn about at the initial configuration. A tensor with
-        xx = yy = zz = 1 and xy = 5 on a ball joint made T negative along the motion. Only those axes count: a
-        planar model's {zz: I} given about the hinge has xx = -m d^2 about the centre of mass, never used."""
+        """An error when the central inertia tensor gives the link a negative kinetic energy (negative_moment)."""
         values: dict = {k: sp.Float(v) for k, v in self.doc.numeric_parameters().items()}
         values.update({s: sp.Float(self.doc.initial.get(c, 0.0)) for c, s in self.doc.coords.items()})
-        try:
-            I = np.array(inertia.xreplace(values).evalf(), dtype=float)
-            W = self.kin.frames[link].omega.jacobian(list(self.doc.rates.values())).xreplace(values)
-            W = np.array(W.xreplace({x: 0 for x in W.free_symbols}).evalf(), dtype=float)  # t = 0
-        except (TypeError, ValueError, KeyError):
-            return  # not evaluated here (each entry was checked to be a finite real number)
-        if not (np.all(np.isfinite(I)) and np.all(np.isfinite(W))) or not W.size:
-            return
-        U, sv, _ = np.linalg.svd(W, full_matrices=False)
-        U = U[:, sv > 1e-9 * max(float(sv[0]), 1e-300)] if sv.size else U[:, :0]
-        if not U.shape[1]:
-            return
-        moments = np.linalg.eigvalsh(U.T @ ((I + I.T) / 2) @ U)
-        scale = max(float(np.max(np.abs(np.linalg.eigvalsh((I + I.T) / 2)))), 1e-300)
-        if moments[0] >= -1e-12 * scale:
+        moment = negative_moment(inertia, self.kin.frames[link].omega, list(self.doc.rates.values()), values)
+        if moment is None:
             return
         where = " about the centre of mass (the tensor given about the origin minus m (|c|² E − c cᵀ))" \
             if about_origin else ""
         raise self.doc.error(path, f"is not the inertia of a body: its moment{where} about an axis the link turns "
-                                   f"about is {moments[0]:.6g}, and the kinetic energy would be negative")
+                                   f"about is {moment:.6g}, and the kinetic energy would be negative")
 
     def shape_inertia(self, shape: Any, m: sp.Expr, path: Path) -> sp.Matrix:
         given = [k for k in ("rod", "disk", "cylinder", "sphere", "box") if getattr(shape, k) is not None]
@@ -699,3 +683,25 @@ def decisions_hold(kin: Kinematics, values: dict) -> bool:
         return all(decide(kind, expr, values) == outcome for _what, kind, expr, outcome in kin.decisions)
     except (TypeError, ValueError, ZeroDivisionError):
         return False
+
+
+def negative_moment(inertia: sp.Matrix, omega: sp.Matrix, rates: list, values: dict) -> float | None:
+    """The negative moment of the central inertia tensor ``inertia`` about an axis the link turns about (the span
+    of d omega / d rates, link axes) at ``values`` (parameters and coordinates; time 0), or None when there is none.
+    A tensor with xx = yy = zz = 1 and xy = 5 on a ball joint made T negative along the motion. Only those axes
+    count: a planar model's {zz: I} given about the hinge has xx = -m d^2 about the centre of mass, never used."""
+    try:
+        I = np.array(inertia.xreplace(values).evalf(), dtype=float)
+        W = omega.jacobian(rates).xreplace(values)
+        W = np.array(W.xreplace({x: 0 for x in W.free_symbols}).evalf(), dtype=float)  # t = 0
+    except (TypeError, ValueError):
+        return None  # not evaluated here (each entry was checked to be a finite real number)
+    if not (np.all(np.isfinite(I)) and np.all(np.isfinite(W))) or not W.size:
+        return None
+    U, sv, _ = np.linalg.svd(W, full_matrices=False)
+    U = U[:, sv > 1e-9 * max(float(sv[0]), 1e-300)]
+    if not U.shape[1]:
+        return None
+    moment = float(np.linalg.eigvalsh(U.T @ ((I + I.T) / 2) @ U)[0])
+    scale = max(float(np.max(np.abs(np.linalg.eigvalsh((I + I.T) / 2)))), 1e-300)
+    return moment if moment < -1e-12 * scale else None

@@ -235,7 +235,8 @@ _LOCK = threading.Lock()
 class _Base:
     """A loaded base model and what a task needs beyond ``with_overrides``: the initial values that depend on
     parameters (re-evaluated per task, as a fresh load would) and the value checks a fresh load makes
-    (masses and principal inertias not negative, finite real numbers)."""
+    (masses not negative, central inertias without a negative moment about an axis the link turns about, finite
+    real numbers)."""
 
     def __init__(self, model) -> None:
         import sympy as sp
@@ -273,6 +274,9 @@ class _Base:
                                         doc.parse(getattr(spec.inertia, k), lp + ("inertia", k), "parameter"),
                                         k in ("xx", "yy", "zz")))
         self.checks = [c for c in self.checks if sp.sympify(c[1]).free_symbols]
+        # the central tensors that move with the parameters, checked as a fresh load does (negative_moment)
+        self.inertias = [(b.name, b.inertia, model.kin.frames[b.name].omega) for b in model.kin.bodies
+                         if not b.particle and b.inertia.free_symbols & set(doc.parameters.values())]
 
     def adopt(self, clone) -> None:
         """Keep on the base what a task compiled or derived on its copy (symbolic expressions and compiled
@@ -292,6 +296,8 @@ class _Base:
     def task_model(self, values: dict[str, float]):
         import sympy as sp
 
+        from mechsys.mechanics.build import negative_moment
+
         clone = self.model.with_overrides(values)
         doc = clone.doc
         subs = {doc.parameters[n]: sp.Float(v) for n, v in doc.parameter_values.items()}
@@ -301,6 +307,13 @@ class _Base:
                 raise InputError(f"{label}: must evaluate to a finite real number")
             if nonnegative and val.real < 0:
                 raise InputError(f"{label}: must not be negative")
+        for name, inertia, omega in self.inertias:
+            point = dict(subs)
+            point.update({s: sp.Float(doc.initial.get(c, 0.0)) for c, s in doc.coords.items()})
+            moment = negative_moment(inertia, omega, list(doc.rates.values()), point)
+            if moment is not None:
+                raise InputError(f"links.{name}.inertia: its moment about an axis the link turns about is "
+                                 f"{moment:.6g}: the kinetic energy would be negative")
         for kind, name, expr in self.dependent:
             key = name if kind == "initial" else f"der({name})"
             if key in values:
