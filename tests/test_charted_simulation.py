@@ -374,6 +374,30 @@ def test_an_output_row_exactly_at_the_lock_is_nan_with_a_note_not_a_failure(tmp_
     assert np.allclose(data["az"][~at_lock], -w**2 * np.cos(w * t), atol=1e-9)
 
 
+def test_a_free_body_started_exactly_at_the_lock_with_an_acceleration_output(tmp_path):
+    """The same body on a free joint, started at the lock (theta = pi/2 at t = 0, where the file's rates are
+    given): the run switched charts, then the tip acceleration at t = 0 stopped the command with 'the mass matrix
+    is singular at t = 0'. That row is NaN with a note; the others are the closed form: free, the body spins about
+    its principal y axis through the centre of mass (which drifts at constant velocity), the tip at 0.5 from it:
+    acceleration -w^2 0.5 (sin(wt + pi/2), 0, cos(wt + pi/2))."""
+    path = tmp_path / "free.yaml"
+    text = SPUN_THROUGH_THE_LOCK.replace("theta: {initial: 0,", "theta: {initial: pi/2,").replace(
+        "coordinates: [psi, theta, phi]", "coordinates: [x, y, z, psi, theta, phi]").replace(
+        "type: spherical", "type: free").replace("coordinates:\n", "coordinates:\n  x: {initial: 0}\n"
+                                                 "  y: {initial: 0}\n  z: {initial: 0}\n", 1)
+    path.write_text(text, encoding="utf-8")
+    out = tmp_path / "free.csv"  # (at t = 2 s, theta = 3 pi/2: the lock again)
+    r = CliRunner().invoke(app, ["simulate", str(path), "--t-end", "1.5", "--dt", "0.5", "-o", str(out)])
+    assert r.exit_code == 0, r.output
+    assert "outputs undefined: a.x, a.y, a.z are NaN at t = 0 s" in " ".join(r.output.split())
+    data = np.genfromtxt(out, delimiter=",", names=True)
+    w = math.pi / 2
+    assert np.all(np.isnan([data["ax"][0], data["ay"][0], data["az"][0]]))
+    t = data["t"][1:]
+    assert np.allclose(data["ax"][1:], -0.5 * w**2 * np.sin(w * t + w), atol=1e-9)
+    assert np.allclose(data["az"][1:], -0.5 * w**2 * np.cos(w * t + w), atol=1e-9)
+
+
 def test_a_force_naming_the_angles_keeps_the_file_s_chart(tmp_path):
     """A heavy top in zxz angles with a spin damping torque written in its own angles, -b*(der(psi)*cos(theta) +
     der(phi)) (the body-z rate): re-charted, the torque was read in zyx angles, another function, and the run was

@@ -579,3 +579,58 @@ def test_a_cyclic_coordinate_not_reduced_because_of_constraints_is_named():
     data = equilibria(BEYOND / "porter_governor.yaml")
     assert data["equilibria"] == []
     assert "with constraints the cyclic coordinate(s) psi are not reduced" in data["message"]
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# a double zero eigenvalue split by rounding is no instability
+HANGING = {"b1": 0.0, "c1": 0.0, "a2": 0.0, "b2": 0.0, "c2": 0.0, "a3": 0.0, "c3": 0.0}
+
+
+def test_a_spinning_chain_of_ball_joints_hanging_is_not_called_unstable_for_its_free_twists():
+    """Three boxes on ball joints hang down while the top one spins about the vertical (der(a1) = 0.5). The twists
+    a2, a3 cost no energy (an independent effective-potential Hessian: 8e-18 and -1.5e-11 beside 0.57..13.9, no
+    negative stiffness; the same frequencies 2.977, 3.975, 7.754, 8.743, 13.706, 14.848 rad/s). Their double zero
+    eigenvalue came out as +-4.8e-8 beside 15 rad/s: `equilibria` said 'unstable', `modes` 'the motion grows'."""
+    from mechsys import load
+    from mechsys.analysis.equilibrium.equilibria import _polish, make_problem
+    from mechsys.analysis.equilibrium.stability import assess
+    from mechsys.numeric.parameters import parameter_values
+
+    path = BEYOND / "chain_ball_spin.yaml"
+    model = load(path, {**HANGING, "b3": 0.13})
+    problem = make_problem(model)
+    p = parameter_values(model)
+    z = _polish(problem, problem.state(problem.equilibrium(np.zeros(len(problem.unknowns)))), p)
+    e = problem.equilibrium(z)
+    assess(problem, e, p)
+    assert e.stability == UNDECIDED and "critical case" in e.reason and "flat" in e.reason
+    assert np.max(np.abs(e.eigenvalues.real)) < 1e-6 * np.max(np.abs(e.eigenvalues))
+    at = [x for c, v in {**HANGING, **e.coordinates}.items() for x in ("--at", f"{c}={v!r}")]
+    modes = json.loads(cli("modes", path, *at, "-f", "json"))
+    assert modes["unstable_modes"] == 0 and "grows" not in modes.get("note", "")
+    assert sorted(abs(complex(*v).imag) for v in modes["eigenvalues"] if abs(complex(*v)) > 1) == \
+        pytest.approx(sorted(2 * [2.977174, 3.974840, 7.753763, 8.743346, 13.70646, 14.84825]), rel=1e-6)
+
+
+def _zxz(q1: float, q2: float, q3: float) -> np.ndarray:
+    def rz(a):
+        return np.array([[math.cos(a), -math.sin(a), 0], [math.sin(a), math.cos(a), 0], [0, 0, 1]])
+
+    def rx(a):
+        return np.array([[1, 0, 0], [0, math.cos(a), -math.sin(a)], [0, math.sin(a), math.cos(a)]])
+
+    return rz(q1) @ rx(q2) @ rz(q3)
+
+
+def test_rests_at_a_gimbal_lock_are_listed_once_whatever_sequence_classified_them():
+    """A box on four springs (free joint, zxz): its rests at the zxz lock are continua of the file's angles (at
+    q2 = pi only q1 - q3 counts). One rest was listed three times (re-charted twice to xzy, once to xyz) and
+    another twice. Each listed rest is now one pose: positions and rotation matrices computed here differ."""
+    out = equilibria(BEYOND / "box_on_springs_zxz.yaml")
+    poses = [(np.array([c["x"], c["y"], c["z"]]), _zxz(c["q1"], c["q2"], c["q3"]))
+             for c in (e["coordinates"] for e in out["equilibria"])]
+    for i, (r1, R1) in enumerate(poses):
+        for r2, R2 in poses[:i]:
+            assert np.max(np.abs(r1 - r2)) > 1e-6 or np.max(np.abs(R1 - R2)) > 1e-6
+    stable = [pose for pose, e in zip(poses, out["equilibria"]) if e["stability"] == STABLE]
+    assert len(stable) == 1 and np.allclose(stable[0][1], np.eye(3), atol=1e-9)  # the box level, at the lock

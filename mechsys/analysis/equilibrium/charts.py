@@ -348,6 +348,10 @@ def review(problem: EquilibriumProblem, equilibria: list[Equilibrium], p: np.nda
     Returns the equilibria kept and a note (empty when nothing happened)."""
     kept, dropped, undecided, seen, regular = [], 0, 0, set(), []
     motions = _Motions(problem, p, {})  # the regular ones, in the order of `regular`
+    # the singular ones kept: one steady motion is a continuum of the singular chart's angles (zxz at theta = pi:
+    # only psi - phi counts), re-charted to whichever sequence is best at each point (a box's rest at the zxz lock
+    # was listed three times, twice in xzy and once in xyz)
+    locked = _Motions(problem, p, motions.memo)
     for e in equilibria:
         found = singularities(problem.model, e.coordinates, p)
         if not found:
@@ -359,6 +363,8 @@ def review(problem: EquilibriumProblem, equilibria: list[Equilibrium], p: np.nda
             elif _conventional(problem, e) and not _conventional(problem, kept[regular[j]]):
                 kept[regular[j]] = e  # show the conventional coordinates (e.g. |theta| <= pi/2 for zyx, r >= 0)
                 motions.keep(e, j)
+            continue
+        if locked.first_same(e) is not None:
             continue
         where = found[0]
         e.chart = where.describe()
@@ -374,6 +380,7 @@ def review(problem: EquilibriumProblem, equilibria: list[Equilibrium], p: np.nda
             undecided += 1
             _undecided(e, where, str(exc))
         kept.append(e)
+        locked.keep(e)
     notes = []
     if dropped:
         notes.append(f"{dropped} solution(s) at a gimbal-lock point are not steady motions in a regular chart "

@@ -12,6 +12,7 @@ from mechsys.analysis.equilibrium.equilibria import (Equilibrium, EquilibriumPro
                                                       is_isolated, settle)
 from mechsys.numeric.parameters import parameter_values
 from mechsys.analysis.equilibrium.linearize import Linearization, linearize
+from mechsys.analysis.equilibrium.stability import zero_like_eigenvalues
 from mechsys.errors import AnalysisError, InputError
 from mechsys.mechanics.model import MechanicalModel
 
@@ -301,7 +302,9 @@ def vibration_modes(model: MechanicalModel, at: dict[str, float] | None = None,
                 zeta[k] = 0.0
     names = list(lin.coordinates)
     top = max(1.0, float(np.max(np.abs(vals)))) if vals.size else 1.0
-    growing = [v for v in vals if v.real > 1e-9 * top and v.imag >= 0]
+    # (a double zero eigenvalue split by rounding into +-4.8e-8 beside 15 rad/s is no growth: zero_like_eigenvalues)
+    growing = [v for v, zero in zip(vals, zero_like_eigenvalues(vals, top)) if v.real > 1e-9 * top and not zero
+               and v.imag >= 0]
     if growing and not unstable:  # no negative stiffness, yet the motion grows: flutter or a gyroscopic instability
         unstable = len(growing)
         note = "; ".join(x for x in (note, f"{len(growing)} eigenvalue(s) with a positive real part (up to "

@@ -31,6 +31,7 @@ import numpy as np
 import sympy as sp
 
 from mechsys.analysis.equilibrium.equilibria import Equilibrium, EquilibriumProblem, newton_scales, wrap
+from mechsys.analysis.equilibrium.stability import zero_like_eigenvalues
 from mechsys.numeric.parameters import parameter_values
 from mechsys.errors import AnalysisError, InputError
 from mechsys.mechanics.dag import FreeSymbols, Substitution
@@ -796,16 +797,17 @@ class NonholonomicProblem(EquilibriumProblem):
         e.structural = lin.structural_text()
         scale = max(1.0, float(np.max(np.abs(vals)))) if len(vals) else 1.0
         tol = 1e-9 * scale
-        e.critical = bool(len(vals) and np.min(np.abs(vals.real)) <= tol)
+        zero_like = zero_like_eigenvalues(vals, scale)
+        e.critical = bool(len(vals) and np.any(zero_like))
         apart = f" ({lin.structural_text()} apart)" if lin.structural else ""
-        if len(vals) and np.max(vals.real) > tol:
+        if np.any(vals.real[~zero_like] > tol):
             e.stability, e.reason = "unstable", f"an eigenvalue has a positive real part{apart}"
         elif len(vals) == 0 or np.max(vals.real) < -tol:
             e.stability, e.reason = ("asymptotically stable",
                                      f"all eigenvalues have negative real parts{apart}: the shape and the speeds "
                                      "return to the steady motion; the ignorable coordinates keep an offset")
         else:
-            zero = int(np.sum(np.abs(vals.real) <= tol))
+            zero = int(np.sum(zero_like))
             e.stability = "undecided"
             e.reason = (f"{zero} eigenvalue(s) with zero real part (critical case){apart}; the energy arguments "
                         "of holonomic systems do not apply to nonholonomic ones")

@@ -17,6 +17,9 @@ if TYPE_CHECKING:
 
 #: Real parts with |Re| <= ZERO_RE * max(1, max |eigenvalue|) count as zero (critical case).
 ZERO_RE = 1e-9
+#: Eigenvalues with |lambda| <= SPLIT_ZERO * max(1, max |eigenvalue|) may be a multiple zero eigenvalue split by
+#: rounding (a Jordan block's zero splits as +-sqrt(eps)-sized pairs): their real parts decide nothing.
+SPLIT_ZERO = 1e-6
 #: Hessian eigenvalues with |h| <= ZERO_H * max(1, max |h|) count as zero (degenerate minimum).
 ZERO_H = 1e-9
 
@@ -219,17 +222,25 @@ def assess(problem: EquilibriumProblem, e: Equilibrium, p: np.ndarray) -> None:
         return
     scale = max(1.0, float(np.max(np.abs(vals)))) if len(vals) else 1.0
     tol = ZERO_RE * scale
-    e.critical = bool(len(vals) and np.min(np.abs(vals.real)) <= tol)
-    if len(vals) and np.max(vals.real) > tol:
+    zero_like = zero_like_eigenvalues(vals, scale)
+    e.critical = bool(len(vals) and np.any(zero_like))
+    if np.any(vals.real[~zero_like] > tol):
         e.stability, e.reason = "unstable", "an eigenvalue has a positive real part"
         return
     if len(vals) == 0 or np.max(vals.real) < -tol:
         e.stability, e.reason = "asymptotically stable", "all eigenvalues have negative real parts"
         return
-    zero = int(np.sum(np.abs(vals.real) <= tol))
+    zero = int(np.sum(zero_like))
     e.stability, e.reason = energy_verdict(problem, e, p, zero)
     if e.stability == "undecided":
         e.stability, e.reason = _conservative_linear(problem, e, p, vals, tol, e.stability, e.reason)
+
+
+def zero_like_eigenvalues(vals: np.ndarray, scale: float) -> np.ndarray:
+    """Which eigenvalues count as zero in the critical case: a real part within ZERO_RE of the scale, or a positive
+    real part on an eigenvalue within SPLIT_ZERO of it (a double zero eigenvalue split by rounding: a spinning chain
+    of ball joints with free twists had +-4.8e-8 beside 15 rad/s, and was called unstable)."""
+    return (np.abs(vals.real) <= ZERO_RE * scale) | ((vals.real > 0) & (np.abs(vals) <= SPLIT_ZERO * scale))
 
 
 def _conservative_linear(problem, e, p, vals, tol, stability, reason) -> tuple[str, str]:
@@ -244,7 +255,7 @@ def _conservative_linear(problem, e, p, vals, tol, stability, reason) -> tuple[s
     if np.max(np.abs(vals.real)) > tol:
         return stability, reason
     # a zero eigenvalue of a Jordan block (rigid-body drift) splits numerically into +-sqrt(eps)-sized pairs
-    tiny = 1e-6 * max(1.0, float(np.max(np.abs(vals))))
+    tiny = SPLIT_ZERO * max(1.0, float(np.max(np.abs(vals))))
     zeros = int(np.sum(np.abs(vals) <= tiny))
     if zeros > len(getattr(problem, "fixed_rates", {})):
         return stability, reason  # a zero eigenvalue that is not a family of steady motions: drift is possible

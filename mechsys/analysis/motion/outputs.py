@@ -20,7 +20,7 @@ def add_outputs(model: MechanicalModel, result: SimulationResult) -> SimulationR
         t0 = time.perf_counter()
         result.outputs = output_columns(model, result, parameter_values(model))
         result.timings["outputs"] = time.perf_counter() - t0
-        undefined = ~np.all(np.isfinite(result.u), axis=1)
+        undefined = ~np.all(np.isfinite(result.u), axis=1) | at_lock(model, result)
         lost = [name for name, column in result.outputs.items() if np.any(np.isnan(column[undefined]))]
         if lost:
             times = ", ".join(f"{t:.6g}" for t in result.t[undefined][:8])
@@ -80,6 +80,17 @@ def deferred_values(model: MechanicalModel, t: float, q: np.ndarray, u: np.ndarr
             for kind, what, k in model.deferred_quantities.values()]
 
 
+def at_lock(model: MechanicalModel, result: SimulationResult) -> np.ndarray:
+    """Which rows of a run lie at a gimbal lock of the file's angles (a run that switched charts), where their q''
+    (and the outputs that read it) are undefined: a free body started exactly at its zyx lock ran in another sequence, then
+    its acceleration(P) output stopped the command with 'the mass matrix is singular at t = 0'."""
+    from mechsys.analysis.motion.simulate import rotation_charts
+    from mechsys.numeric.rotations import singular_chart
+
+    charts = rotation_charts(model)
+    return np.array([bool(charts) and bool(singular_chart(charts, q)) for q in result.q], dtype=bool)
+
+
 def accelerations_along(model: MechanicalModel, result: SimulationResult,
                         p: np.ndarray) -> Iterator[tuple[np.ndarray, np.ndarray]]:
     """(q'', multipliers) from the equations of motion at each output time of ``result``, the resting contacts
@@ -90,8 +101,9 @@ def accelerations_along(model: MechanicalModel, result: SimulationResult,
     rhs = RightHandSide(c, np.asarray(p, float))
     captured = [(im["t"], c.gap_names.index(im["contact"])) for im in result.impacts
                 if im.get("captured") and im["contact"] in c.gap_names]
-    for t, q, u in zip(result.t, result.q, result.u):
-        if not np.all(np.isfinite(u)):  # a re-charted row at the file's gimbal lock: rates undefined there
+    lock = at_lock(model, result)
+    for k, (t, q, u) in enumerate(zip(result.t, result.q, result.u)):
+        if lock[k] or not np.all(np.isfinite(u)):  # a re-charted row at the file's gimbal lock: no q'' there
             yield np.full(len(q), np.nan), np.full(c.m, np.nan)
             continue
         rhs.persistent = sorted({k for tc, k in captured if tc <= t})
