@@ -634,3 +634,11 @@ def test_rests_at_a_gimbal_lock_are_listed_once_whatever_sequence_classified_the
             assert np.max(np.abs(r1 - r2)) > 1e-6 or np.max(np.abs(R1 - R2)) > 1e-6
     stable = [pose for pose, e in zip(poses, out["equilibria"]) if e["stability"] == STABLE]
     assert len(stable) == 1 and np.allclose(stable[0][1], np.eye(3), atol=1e-9)  # the box level, at the lock
+
+
+def test_modes_say_that_the_stable_rest_was_found_at_the_lock():
+    """`modes` of the same box vibrated about an unstable rest and said 'the search found no stable equilibrium',
+    where the stable one (level, z = 0.1547) was found at the zxz lock and passed over."""
+    note = json.loads(cli("modes", BEYOND / "box_on_springs_zxz.yaml", "-f", "json"))["note"]
+    assert "the stable equilibrium found" in note and "z = 0.154723" in note and "coordinate singularity" in note
+    assert "found no stable" not in note

@@ -119,6 +119,14 @@ def _first_stable(res, candidates: list[Equilibrium], kind: str = "equilibrium")
     stable = [e for e in candidates if e.stability in _STABLE]
     if stable:
         return min(stable, key=lambda e: _from_initial(res.problem, e)), ""
+    skipped = [e for e in res.equilibria if (e.chart or e.branch) and e.stability in _STABLE]
+    if skipped:  # found, but where these coordinates cannot linearize it (a box's level rest at its zxz lock)
+        where = skipped[0].chart or skipped[0].branch
+        coords = ", ".join(f"{c} = {v:.6g}" for c, v in skipped[0].coordinates.items())
+        return candidates[0], (f"the stable {kind} found ({coords}) is at a {where}, where these coordinates "
+                               f"cannot be linearized: these modes are about the first regular one found "
+                               f"({candidates[0].stability}); write the joint with another sequence to vibrate "
+                               "about the stable one")
     what = f" ({res.search.text()})" if res.search is not None else ""
     return candidates[0], (f"the search found no stable {kind}{what}: these modes are about the first one "
                            f"found ({candidates[0].stability}); give another with --at")
