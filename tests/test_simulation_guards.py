@@ -164,3 +164,38 @@ def test_a_stiff_damped_pair_is_told_to_loosen_the_tolerances(tmp_path):
     assert ok.exit_code == 0, ok.output
     assert json.loads(ok.output)["simulation summary"]["x1(t_end)"] == pytest.approx(math.cos(10 / math.sqrt(2)),
                                                                                      abs=1e-5)
+
+
+@pytest.mark.parametrize("options", [{"dt": 0.01}, {"dt": 0.5}, {"dt": 0.01, "method": "Radau"}, {}])
+def test_a_free_parallelogram_whirled_through_its_flattened_position_stops_there(options):
+    """A parallelogram four-bar (crank = rocker = 0.4, coupler = ground = 1, unit rods) whirled from theta2 = pi/2
+    at 3 rad/s. On its branch theta4 = theta2 and (5/3) m a^2 theta2'' = -2 m g a cos(theta2) (integrated here);
+    at theta2 = pi all four joints are collinear and the antiparallelogram branch crosses it. The index-1 equations
+    went on along the other branch at a later crossing (theta2 at t = 1: 9.42, 3.14, 7.79 or -3.14 with the output
+    interval and the method, where it is 7.933), exit 0. The run now stops at the first crossing, by any grid."""
+    from scipy.integrate import solve_ivp
+
+    a, g = 0.4, 9.81
+    crossing = solve_ivp(lambda t, y: [y[1], -2 * g * a * math.cos(y[0]) / (5 / 3 * a * a)], (0, 1),
+                         [math.pi / 2, 3.0], rtol=1e-12, atol=1e-12, events=lambda t, y: y[0] - math.pi).t_events[0][0]
+    model = mechsys.load(DATA_DIR / "beyond" / "parallelogram_whirled.yaml")
+    with pytest.raises(AnalysisError, match="passed a singular configuration of its closed loop near t = ") as err:
+        simulate(model, t_end=1.0, **options)
+    at = float(str(err.value).split("near t = ")[1].split(" s")[0])
+    assert abs(at - crossing) <= max(options.get("dt", 0.01), 0.02) / 8  # within a sampled point of it
+
+
+def test_a_driven_parallelogram_is_carried_through_its_flattened_position(tmp_path):
+    """Driven (no degree of freedom: theta2 = 0.5 + 3 t), the crank carries the loop through theta2 = pi at
+    t = 0.88 on its branch, theta4 = theta2 and theta3 = -theta2; it is not stopped."""
+    text = (DATA_DIR / "beyond" / "parallelogram_whirled.yaml").read_text().replace(
+        "theta2: {initial: pi/2, rate: w0}", "theta2: {prescribed: 0.5 + w0*t}").replace(
+        "theta3: {initial: -pi/2, rate: -w0}", "theta3: {initial: -0.5, rate: -w0}").replace(
+        "theta4: {initial: pi/2, rate: w0}", "theta4: {initial: 0.5, rate: w0}")
+    path = tmp_path / "driven.yaml"
+    path.write_text(text)
+    r = simulate(mechsys.load(path), t_end=1.5, dt=0.01)
+    names = r.coordinates
+    theta2 = 0.5 + 3 * r.t
+    assert np.allclose(r.q[:, names.index("theta4")], theta2, atol=1e-8)
+    assert np.allclose(r.q[:, names.index("theta3")], -theta2, atol=1e-8)
