@@ -426,3 +426,22 @@ def test_a_force_naming_the_angles_keeps_the_file_s_chart(tmp_path):
     R_ref, w_ref = np.array([_matrix(y[:4]) for y in sol.y.T]), sol.y[4:].T
     eR, ew = _errors(result, zxz, zxz_omega, R_ref, w_ref)
     assert eR < 1e-8 and ew < 1e-6
+
+
+def test_a_run_that_switches_charts_starts_on_the_rolling_constraints_and_so_does_its_warm_plan(tmp_path,
+                                                                                               monkeypatch):
+    """A ball rolling on a plane, its file rates off the rolling rows (der(x) = 1 where r der(a2) = 0.9). The start
+    is the minimum-norm correction: der(x) = 1 - 0.1/1.01 = 0.9009901, and the ball rolls straight at that speed.
+    Spun about y it passes its zyx lock; the run that switched charts wrote the file's rates as its row t = 0
+    (residual 0.1), and its warm plan started the next run from them: x(0.1) = 0.0910891, not 0.0900990."""
+    monkeypatch.setenv("MECHSYS_CACHE", str(tmp_path / "cache"))
+    path = ROOT / "tests" / "data" / "beyond" / "ball_on_plane.yaml"
+    sets = ["--set", "der(y)=0", "--set", "der(a3)=0", "--set", "der(a2)=9"]
+    v = 1 - 0.1 / 1.01
+    for t_end in ("1", "0.1"):
+        out = tmp_path / f"run{t_end}.csv"
+        r = CliRunner().invoke(app, ["simulate", str(path), *sets, "--t-end", t_end, "--dt", "0.01", "-o", str(out)])
+        assert r.exit_code == 0, r.output
+        data = np.genfromtxt(out, delimiter=",", names=True)
+        assert np.max(data["residual"]) < 1e-12
+        assert np.allclose(data["x"], v * data["t"], atol=1e-9) and np.allclose(data["derx"], v, atol=1e-9)
