@@ -141,6 +141,20 @@ def test_sibling_check_file_is_discovered_and_markdown_written(tmp_path):
     ("{name: derive value, analysis: derive, output: 'M[1,1]', value: 99}", ["give 'expression'"]),
     ("{name: derive nothing, analysis: derive, output: 'M[1,1]'}", ["give 'expression'"]),
     ("{name: equilibrium and value, analysis: equilibria, equilibrium: {q: 0}, value: 1}", ["not used"]),
+    # options that were ignored (the run used the defaults: a check that should fail passed) or crashed the run
+    ("{name: misspelt, analysis: simulate, options: {tend: 0.3}, output: final.q, min: 0}",
+     ["simulate has no option 'tend'", "did you mean 't_end'"]),
+    ("{name: dt zero, analysis: simulate, options: {t_end: 1, dt: 0}, output: final.q, min: 0}",
+     ["dt must be a positive finite number"]),
+    ("{name: t_end text, analysis: simulate, options: {t_end: abc}, output: final.q, min: 0}",
+     ["t_end must be a positive finite number"]),
+    ("{name: rtol, analysis: simulate, options: {rtol: 1e-9}, output: final.q, min: 0}", ["no option 'rtol'"]),
+    ("{name: info options, analysis: info, options: {t_end: 1}, output: dof, value: 1}", ["info has no option"]),
+    # expectations that can never fail or never pass
+    ("{name: inf tolerance, analysis: info, output: dof, value: 5, tolerance: .inf}", ["'tolerance' must be a finite"]),
+    ("{name: nan value, analysis: info, output: dof, value: .nan}", ["'value' must be a finite"]),
+    ("{name: empty range, analysis: info, output: dof, min: 5, max: 0}", ["nothing can pass"]),
+    ("{name: verdict, analysis: equilibria, equilibrium: {q: 0}, stability: wobbly}", ["stability"]),
 ])
 def test_invalid_expectation_in_a_sibling_file_is_an_input_error(tmp_path, entry, words):
     (tmp_path / "p57.yaml").write_text(model_without_expect("problem57"), encoding="utf-8")
@@ -161,6 +175,19 @@ def test_invalid_expectation_in_the_model_file_is_an_input_error(tmp_path):
     assert proc.returncode == 2, proc.stdout + proc.stderr
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and "p57.yaml" in lines[0] and "colour" in lines[0]
+
+
+def test_a_misspelt_option_in_the_model_file_is_an_input_error_at_its_line(tmp_path):
+    """`options: {tend: 0.3}` ran 10 s with the defaults, and the check passed where 0.3 s would fail."""
+    model = tmp_path / "p57.yaml"
+    text = model_without_expect("problem57")
+    model.write_text(text + "expect:\n  - {name: x, analysis: simulate, options: {tend: 0.3}, output: final.q, "
+                            "min: 0}\n", encoding="utf-8")
+    proc = mechsys_check(model)
+    assert proc.returncode == 2, proc.stdout + proc.stderr
+    line = len(text.splitlines()) + 2
+    assert proc.stderr.strip() == (f"{model}:{line}:45: expect[0].options.tend: simulate has no option 'tend' "
+                                   "(did you mean 't_end'?) (options: t_end, dt, method)")
 
 
 def test_a_missing_path_is_an_input_error(tmp_path):

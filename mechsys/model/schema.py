@@ -1,6 +1,7 @@
 """The mechsys YAML language v1 as pydantic models (structure only; expressions are parsed later)."""
 from __future__ import annotations
 
+import math
 from typing import Annotated, Literal, Union
 
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, field_validator, model_validator
@@ -408,7 +409,8 @@ class Expectation(Strict):
                                                              description="analysis options, e.g. t_end")
     output: str | None = Field(None, description="an output of the analysis, e.g. dof, eq2.beta, final.beta")
     equilibrium: dict[str, float] | None = Field(None, description="equilibria: some equilibrium has these values")
-    stability: str | None = Field(None, description="with 'equilibrium': its expected verdict")
+    stability: Literal["asymptotically stable", "stable", "unstable", "undecided"] | None = Field(
+        None, description="with 'equilibrium': its expected verdict")
     expression: str | None = Field(None, description="derive: the expected expression of 'output' (e.g. M[1,1])")
     value: Union[int, float, str, bool, None] = None
     tolerance: float = Field(0.0, ge=0, description="absolute tolerance on 'value'")
@@ -421,6 +423,12 @@ class Expectation(Strict):
         """An expectation that states nothing to compare would pass whatever the analysis gives (or crash): each
         kind must say what it expects, and keys that would be ignored are refused."""
         compared = [k for k in ("value", "min", "max") if getattr(self, k) is not None]
+        for k in ("value", "min", "max", "tolerance", "rel_tolerance"):  # nan and inf never fail or never pass
+            v = getattr(self, k)
+            if isinstance(v, float) and not math.isfinite(v):
+                raise ValueError(f"'{k}' must be a finite number, not {v}")
+        if self.min is not None and self.max is not None and self.min > self.max:
+            raise ValueError(f"'min' ({self.min:g}) is above 'max' ({self.max:g}): nothing can pass")
         if self.equilibrium is not None:
             if self.analysis != "equilibria":
                 raise ValueError("'equilibrium' belongs to analysis: equilibria")

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import yaml
 
+from mechsys.analysis.batch.tasks import option_problem
 from mechsys.errors import InputError
 
 
@@ -45,6 +46,11 @@ def discover(paths: list[str]) -> list[tuple[str, list[dict]]]:
 
         doc = read_document(f)  # validates the model and its expect section (InputError -> exit 2)
         expectations = [e.model_dump() for e in doc.spec.expect]
+        for i, e in enumerate(expectations):
+            for key, value in e["options"].items():
+                why = option_problem(e["analysis"], key, value)
+                if why:
+                    raise doc.error(("expect", i, "options", key), why, key=True)
         sibling = f.with_name(f.stem + ".check.yaml")
         if sibling.exists():
             expectations += _sibling_expectations(sibling)
@@ -72,6 +78,10 @@ def _sibling_expectations(path: Path) -> list[dict]:
             err = exc.errors()[0]
             raise InputError(f"{'.'.join(map(str, err['loc']))}: {err['msg']}", str(path), 1, 1,
                              f"expect[{i}]") from None
+        for key, value in out[-1]["options"].items():
+            why = option_problem(out[-1]["analysis"], key, value)
+            if why:
+                raise InputError(why, str(path), 1, 1, f"expect[{i}].options.{key}")
     return out
 
 

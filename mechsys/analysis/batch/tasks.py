@@ -161,6 +161,42 @@ ANALYSES: dict[str, Callable[[MechanicalModel, dict], Outputs]] = {
 }
 
 
+#: The options each analysis reads, and what a value must be: a positive finite number, a number, a whole number
+#: of at least 2, text, or anything (search and at: text or a mapping, the task parses them).
+OPTIONS: dict[str, dict[str, str]] = {
+    "collide": {"impact": "any"},
+    "derive": {"method": "text"},
+    "bifurcations": {"parameter": "text", "start": "number", "stop": "number", "points": "count"},
+    "info": {},
+    "equilibria": {"search": "any"},
+    "modes": {"at": "any"},
+    "simulate": {"t_end": "positive", "dt": "positive", "method": "text"},
+}
+
+
+def option_problem(analysis: str, key: str, value: object) -> str | None:
+    """Why ``key: value`` is not an option of ``analysis`` (None: it is). A `check` expectation whose options
+    were misspelt ran with the defaults and passed: `{tend: 0.3}` simulated 10 s."""
+    import difflib
+
+    kinds = OPTIONS.get(analysis, {})
+    if key not in kinds:
+        close = difflib.get_close_matches(key, list(kinds), n=1)
+        hint = f" (did you mean {close[0]!r}?)" if close else ""
+        return f"{analysis} has no option {key!r}{hint} (options: {', '.join(kinds) or 'none'})"
+    kind = kinds[key]
+    number = isinstance(value, (int, float)) and not isinstance(value, bool)
+    if kind == "positive" and not (number and math.isfinite(value) and value > 0):
+        return f"{key} must be a positive finite number, not {value!r}"
+    if kind == "number" and not (number and math.isfinite(value)):
+        return f"{key} must be a finite number, not {value!r}"
+    if kind == "count" and not (number and float(value).is_integer() and value >= 2):
+        return f"{key} must be a whole number of at least 2, not {value!r}"
+    if kind == "text" and not isinstance(value, str):
+        return f"{key} must be text, not {value!r}"
+    return None
+
+
 def run_task(path: str, analysis: str, overrides: dict | None = None, options: dict | None = None) -> Outputs:
     """Load ``path`` with ``overrides`` and run ``analysis``; the outputs are flat scalars (numbers, strings,
     booleans) named like ``eq2.beta`` or ``final.der(alpha)``."""
