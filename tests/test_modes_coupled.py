@@ -104,3 +104,35 @@ def test_a_rotor_above_its_threshold_counts_its_growing_modes():
     assert data["unstable_modes"] == 1
     assert f"up to {growth:.6g} 1/s" in data["note"]
     assert cli_json("modes", JEFFCOTT, "--set", "Omega=50")["unstable_modes"] == 0
+
+
+DAMPED_BLOCK = """\
+name: damped_block
+parameters: {m: 1, k: 100, c: 2}
+coordinates:
+  x: {initial: 0.5, rate: 0}
+ground:
+  points: {A: ANCHOR}
+links:
+  b:
+    joint: {type: prismatic, parent: ground, axis: x, coordinate: x}
+    mass: m
+forces:
+  - {type: spring, between: [b, ground.A], stiffness: k, free_length: FREE}
+  - {type: damper, between: [b, ground.A], coefficient: c}
+"""
+
+
+def test_a_damper_of_zero_length_at_the_rest_is_refused_not_dropped(tmp_path):
+    """A block on a spring and a damper, both to the anchor A. With A 1 m away (the spring's free length 1) the rest
+    is x = 0 and the damping ratio c / (2 sqrt(k m)) = 0.1. With A at the block's rest (free length 0) the damper has
+    no direction there; its linearization (sign(0) = 0) dropped it: ratio 0 and 'stable (critical)'."""
+    apart, together = tmp_path / "apart.yaml", tmp_path / "together.yaml"
+    apart.write_text(DAMPED_BLOCK.replace("ANCHOR", "[-1, 0, 0]").replace("FREE", "1"))
+    together.write_text(DAMPED_BLOCK.replace("ANCHOR", "[0, 0, 0]").replace("FREE", "0"))
+    assert cli_json("modes", str(apart))["modes"][0]["damping_ratio"] == pytest.approx(0.1, rel=1e-12)
+    result = CliRunner().invoke(app, ["modes", str(together)])
+    assert result.exit_code == 1 and "the damper between b and ground.A has zero length" in result.output
+    (e,) = cli_json("equilibria", str(together))["equilibria"]
+    assert e["coordinates"]["x"] == pytest.approx(0.0, abs=1e-12) and e["stability"] == "undecided"
+    assert "zero length" in e["reason"]

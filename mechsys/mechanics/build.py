@@ -638,6 +638,7 @@ class Builder:
                 a = self.point(f.between[0], fp + ("between", 0))
                 b = self.point(f.between[1], fp + ("between", 1))
                 data["d"] = a - b
+                data["between"] = tuple(f.between)
                 if f.type == "spring":
                     data["k"] = doc.parse(f.stiffness, fp + ("stiffness",), "kinematic")
                     data["l0"] = doc.parse(f.free_length, fp + ("free_length",), "kinematic")

@@ -253,6 +253,26 @@ class MechanicalModel:
         """Generalized forces not derived from V, by virtual power: Q_i = sum F . dv/d(der(q_i))."""
         return self.nonconservative_forces(self.kin.loads)
 
+    def zero_length_elements(self, coordinates: dict[str, float], values: dict) -> list[str]:
+        """The dampers and actuators whose length vanishes at ``coordinates`` (with ``values`` of the parameters,
+        symbols to numbers), as 'the damper between A and B': along their line the force has no direction there,
+        and their linearization (sympy's sign(0) = 0) drops them: a damper between a block and its anchor gave a
+        damping ratio of 0 at the rest where it is 0.1."""
+        point = {**values, **{self.doc.coords[c]: v for c, v in coordinates.items() if c in self.doc.coords},
+                 self.t: 0}
+        out = []
+        for load in self.kin.loads:
+            if load.kind in ("damper", "actuator"):
+                d = load.data["d"].xreplace(point)
+                try:
+                    length = float(sp.sqrt((d.T * d)[0]).evalf())
+                except (TypeError, ValueError):
+                    continue
+                if length <= 1e-12 * (1 + max((abs(v) for v in coordinates.values()), default=0.0)):
+                    a, b = load.data.get("between", ("?", "?"))
+                    out.append(f"the {load.kind} between {a} and {b}")
+        return out
+
     def nonconservative_forces(self, loads: list) -> sp.Matrix:
         """Generalized forces of the given loads' non-potential parts."""
         n = len(self.q)

@@ -12,7 +12,7 @@ from mechsys.analysis.equilibrium.equilibria import (Equilibrium, EquilibriumPro
                                                       is_isolated, settle)
 from mechsys.numeric.parameters import parameter_values
 from mechsys.analysis.equilibrium.linearize import Linearization, linearize
-from mechsys.analysis.equilibrium.stability import zero_like_eigenvalues
+from mechsys.analysis.equilibrium.stability import zero_length_reason, zero_like_eigenvalues
 from mechsys.errors import AnalysisError, InputError
 from mechsys.mechanics.model import MechanicalModel
 
@@ -274,6 +274,9 @@ def vibration_modes(model: MechanicalModel, at: dict[str, float] | None = None,
     if not model.is_holonomic:
         return steady_modes(model, at, options)
     e, note = _equilibrium(model, at)
+    lost = model.zero_length_elements(e.coordinates, dict(zip(model.parameter_symbols, parameter_values(model))))
+    if lost:  # a damper between a block and its anchor gave a damping ratio of 0 at the rest where it is 0.1
+        raise AnalysisError(f"at the equilibrium, {zero_length_reason(lost)}")
     lin = linearize(model, e)
     red, condensed = reduce(model, lin)
     Ks = (red.K + red.K.T) / 2

@@ -216,6 +216,11 @@ def assess(problem: EquilibriumProblem, e: Equilibrium, p: np.ndarray) -> None:
         return
     vals, J = eigen(A, B, pencil_positions(problem, N))
     e.eigenvalues, e.jacobian = vals, J
+    lost = problem.model.zero_length_elements(e.coordinates, dict(zip(problem.model.parameter_symbols, p)))
+    if lost:
+        e.critical = False
+        e.stability, e.reason = "undecided", zero_length_reason(lost)
+        return
     if not len(vals):  # not 'all eigenvalues have negative real parts', which held only for want of any
         e.critical = False
         e.stability, e.reason = "stable", LOCKED
@@ -234,6 +239,12 @@ def assess(problem: EquilibriumProblem, e: Equilibrium, p: np.ndarray) -> None:
     e.stability, e.reason = energy_verdict(problem, e, p, zero)
     if e.stability == "undecided":
         e.stability, e.reason = _conservative_linear(problem, e, p, vals, tol, e.stability, e.reason)
+
+
+def zero_length_reason(lost: list[str]) -> str:
+    """Why no verdict (or modes) at a configuration where dampers or actuators have zero length."""
+    return (f"{', '.join(lost)} {'has' if len(lost) == 1 else 'have'} zero length here: along its line the force has "
+            "no direction, so the linearization does not hold it (attach it between points that stay apart)")
 
 
 def zero_like_eigenvalues(vals: np.ndarray, scale: float) -> np.ndarray:
