@@ -119,3 +119,18 @@ def test_the_symbolic_linearization_prints_springs_without_their_kinks(tmp_path)
     assert "DiracDelta" not in text and "sign(" not in text
     squeezed = " ".join(text.split())
     assert "K1 + K1*mu/(1 + mu)**2" in squeezed and "-c2" in squeezed
+
+
+@pytest.mark.parametrize("free_length", [0.05, 0.1, 1.0])
+def test_a_block_on_a_spring_to_its_own_line_rests_at_both_ends_of_the_free_length(tmp_path, free_length):
+    """A block on a spring to the ground point on its line, free length L: rests at x = -L and x = L (closed form;
+    x = 0 is where the spring force jumps). For L = 0.1 and 0.05 only one was found: the first start, x = 0, ended
+    on the jump, and deflating it repelled Newton from the rest at -L."""
+    path = tmp_path / "block.yaml"
+    path.write_text("name: block\nparameters: {m: 1, k: 100, L: 0.1}\ncoordinates:\n  x: {initial: 0, rate: 0}\n"
+                    "links:\n  b:\n    joint: {type: prismatic, parent: ground, axis: x, coordinate: x}\n"
+                    "    mass: m\nforces:\n  - {type: spring, between: [b, ground], stiffness: k, free_length: L}\n")
+    result = CliRunner().invoke(app, ["equilibria", str(path), "--set", f"L={free_length!r}", "-f", "json"])
+    assert result.exit_code == 0, result.output
+    rests = sorted(e["coordinates"]["x"] for e in json.loads(result.stdout)["equilibria"])
+    assert rests == pytest.approx([-free_length, free_length], abs=1e-12)

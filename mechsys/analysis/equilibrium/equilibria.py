@@ -918,11 +918,17 @@ def _search(problem: EquilibriumProblem, p: np.ndarray, plan: SearchReport, seed
     for _ in range(count):
         candidates.append(_draw(plan, rng))
     roots: list[np.ndarray] = []
+    jumps: list[np.ndarray] = []  # where the rest equations jump (drop_singular reports them): not deflated, a
+    # spring of zero length's x = 0 repelled Newton from the rest at x = -0.1 (only x = 0.1 was found)
     for start in candidates:
         z = _newton(problem, problem.start(start, p), p, roots)
         if z is None:
             continue
         z = problem.normalize(z)
+        if problem.non_smooth and problem.discontinuity(z, p):
+            if is_new_root(problem, z, jumps):
+                jumps.append(z)
+            continue
         # a box the user gave (--search) restricts the answer; the default boxes only place the starts, so a root
         # Newton reaches outside them is kept (a steady speed of 12 rad/s was dropped by the default +-10 box)
         inside = all(lo - 1e-9 <= z[k] <= hi + 1e-9 or problem.is_angle()[k] or not given[k]
@@ -935,7 +941,7 @@ def _search(problem: EquilibriumProblem, p: np.ndarray, plan: SearchReport, seed
         plan.outside += [f"{n} = {z[k]:.6g}" for k, (n, (lo, hi)) in enumerate(zip(names, default_box))
                          if not (given[k] or problem.is_angle()[k] or n in plan.solved_rates
                                  or n in plan.spread_rates or lo <= z[k] <= hi)]
-    return roots
+    return roots + jumps
 
 
 def drop_singular(problem: EquilibriumProblem, roots: list[np.ndarray], p: np.ndarray,
