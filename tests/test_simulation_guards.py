@@ -199,3 +199,18 @@ def test_a_driven_parallelogram_is_carried_through_its_flattened_position(tmp_pa
     theta2 = 0.5 + 3 * r.t
     assert np.allclose(r.q[:, names.index("theta4")], theta2, atol=1e-8)
     assert np.allclose(r.q[:, names.index("theta3")], -theta2, atol=1e-8)
+
+
+def test_a_torque_on_a_massless_hub_that_the_constraints_let_turn_is_refused(tmp_path):
+    """A massless hub with a 1 N m torque carries a wheel (I = 1) whose absolute angle a + b is locked: the hub may
+    turn (the wheel counter-rotating relative to it), nothing has inertia along that motion, and a force drives it.
+    The saddle-point system is regular, and the run 'stayed at rest' (0/0). Without the lock the same model is
+    refused ('the mass matrix is singular')."""
+    path = tmp_path / "hub.yaml"
+    path.write_text("name: hub\ncoordinates:\n  a: {initial: 0.2}\n  b: {initial: 0.3}\nlinks:\n  hub:\n"
+                    "    joint: {type: revolute, parent: ground, axis: z, coordinate: a}\n  wheel:\n"
+                    "    joint: {type: revolute, parent: hub, axis: z, coordinate: b}\n    mass: 1\n"
+                    "    inertia: {zz: 1}\nconstraints:\n  - {type: holonomic, name: lock, expression: a + b - 0.5}\n"
+                    "forces:\n  - {type: torque, on: hub, axis: z, value: 1}\n")
+    with pytest.raises(AnalysisError, match="a force drives one that carries no mass or inertia"):
+        simulate(mechsys.load(path), t_end=1.0)

@@ -935,6 +935,11 @@ def _start(model: MechanicalModel, c: Compiled, p: np.ndarray) -> tuple[np.ndarr
         raise AnalysisError("the mass matrix or the forces are not finite at t = 0 (an overflow or a division by "
                             "zero: check the parameter values, e.g. a mass of 1e200 squared)")
     cond = _motion_condition(c, p, q0, u0, M0)
+    if _massless_driven(c, p, q0, u0, M0, np.ravel(f0)):
+        raise AnalysisError("the mass matrix is singular at t = 0 on the motions the constraints allow: a force "
+                            "drives one that carries no mass or inertia (a massless link that a torque turns while "
+                            "the constraints let it), so the equations do not determine it; give it mass or inertia, "
+                            "or make it prescribed")
     if cond > 1e8:
         warnings.append(f"the mass matrix is badly conditioned (cond = {cond:.2e}): results may lose accuracy")
     return q0, u0, warnings
@@ -966,13 +971,38 @@ def _motion_condition(c: Compiled, p: np.ndarray, q: np.ndarray, u: np.ndarray, 
 
     if not M.size:
         return 1.0
+    scale = float(np.linalg.norm(M, 2))
     if c.m:
         with np.errstate(all="ignore"):
             A = c.A(0.0, q, u, p)
         if np.all(np.isfinite(A)):
             N = sla.null_space(A)
             M = N.T @ M @ N
-    return float(np.linalg.cond(M)) if M.size else 1.0
+    if not M.size:
+        return 1.0
+    return float(np.linalg.cond(M))
+
+
+def _massless_driven(c: Compiled, p: np.ndarray, q: np.ndarray, u: np.ndarray, M: np.ndarray, f: np.ndarray) -> bool:
+    """Whether a motion the constraints allow carries no mass or inertia (on N^T M N, N a basis of A's null space,
+    against the whole M's size) while a force drives it (f along it): the equations then do not determine it. A
+    massless hub turned by a torque, its wheel's absolute angle locked, stayed at rest (0/0). A massless motion that
+    no force drives (a rod's spin about its own axis in an RSSR linkage) is left to the least-squares solve."""
+    import scipy.linalg as sla
+
+    if not c.m or not M.size:
+        return False
+    with np.errstate(all="ignore"):
+        A = c.A(0.0, q, u, p)
+    if not np.all(np.isfinite(A)):
+        return False
+    N = sla.null_space(A)
+    if not N.size:
+        return False
+    w, V = np.linalg.eigh(N.T @ ((M + M.T) / 2) @ N)
+    scale = float(np.linalg.norm(M, 2))
+    free = N @ V[:, w <= 1e-13 * scale]  # massless allowed motions (unit columns)
+    return bool(free.size and np.max(np.abs(free.T @ f)) > 1e-9 * max(float(np.linalg.norm(f)), 1e-300))
 
 
 def _closed_loop_scipy(job: Integration, y0: np.ndarray) -> tuple:
