@@ -214,3 +214,19 @@ def test_a_torque_on_a_massless_hub_that_the_constraints_let_turn_is_refused(tmp
                     "forces:\n  - {type: torque, on: hub, axis: z, value: 1}\n")
     with pytest.raises(AnalysisError, match="a force drives one that carries no mass or inertia"):
         simulate(mechsys.load(path), t_end=1.0)
+
+
+def test_a_prescribed_motion_whose_velocity_jumps_is_refused_where_the_run_meets_the_jump(tmp_path):
+    """A pendulum on a cart prescribed as s = abs(t - 0.5): at t = 0.5 the cart's velocity jumps from -1 to 1 m/s,
+    an impulse that throws the pendulum (to -3.6 rad/s by t = 0.6 with the jump smoothed over 1e-4 s). The run kept
+    th = 0 and th' = 0 (sympy's DiracDelta evaluates to 0), exit 0. Before the jump the run is fine."""
+    path = tmp_path / "cart.yaml"
+    path.write_text("name: presc\nparameters: {m: 1, l: 0.5, g: 9.81}\ncoordinates:\n"
+                    "  s: {prescribed: \"abs(t - 0.5)\"}\n  th: {initial: 0}\nlinks:\n  cart:\n"
+                    "    joint: {type: prismatic, parent: ground, axis: x, coordinate: s}\n  rod:\n"
+                    "    joint: {type: revolute, parent: cart, axis: z, coordinate: th}\n    mass: m\n"
+                    "    center_of_mass: [0, -l, 0]\nforces:\n  - {type: gravity, acceleration: [0, -g, 0]}\n")
+    with pytest.raises(AnalysisError, match="prescribed motion of s .* velocity by a jump near t = 0.49"):
+        simulate(mechsys.load(path, release_prescribed=True), t_end=1.0)
+    r = simulate(mechsys.load(path, release_prescribed=True), t_end=0.4)
+    assert np.max(np.abs(r.q[:, r.coordinates.index("th")])) < 1e-12  # constant cart velocity: no swing
