@@ -564,7 +564,9 @@ def singularity_note(c: Compiled, p: np.ndarray, t: float, y: np.ndarray) -> str
 
 
 #: A closed loop whose constraint Jacobian comes this close to losing rank (smallest over largest of its generic
-#: rank's singular values, at an output row between two larger ones) passed a change point (PassageWatch).
+#: rank's singular values, at an output row between two larger ones, relative to the largest such ratio of the run
+#: so far: a mechanism's rows mix units, so its ratio is small or large by its scales alone) passed a change point
+#: (PassageWatch).
 PASSAGE = 0.02
 
 
@@ -577,15 +579,16 @@ class PassageWatch:
     crank's rate jumping from 8.29 to -5.60 rad/s with energy kept (exit 0, no note). A fully driven loop (no
     degree of freedom) is not watched: its drives carry it on its branch.
 
-    The ratio is read at the output rows and, where an interval may hide a passage (a ratio below 10 PASSAGE at an
-    end, or the loop's orientation, det(A R) for two fixed random R, reversed across it), at 64 points inside it
+    The ratio is read at the output rows and, where an interval may hide a passage (a ratio below 5 PASSAGE at an
+    end or on the cubic path between its rows, or the loop's orientation, det(A R) for two fixed random R, reversed
+    across it), at 64 points inside it, and closer where the ratio dips below 5 PASSAGE there
     that ``integrate(y, times)`` gives (the rows at those times from y at times[0]). ``check`` is called with each
     solve's rows as they come, so the run stops at the first passage."""
 
     def __init__(self, c: Compiled, p: np.ndarray, t0: float, y0: np.ndarray,
                  integrate: Callable[[np.ndarray, np.ndarray], np.ndarray]) -> None:
         self.c, self.p, self.integrate = c, p, integrate
-        self.rank, self.last = 0, None  # last: (t, y, ratio, signs) of the row checked last
+        self.rank, self.last, self.best = 0, None, 0.0  # last: (t, y, ratio, signs) of the row checked last
         if not c.m:
             return
         with np.errstate(all="ignore"):
@@ -599,6 +602,12 @@ class PassageWatch:
         self.probes = [rng.standard_normal((c.n, A.shape[0])) for _ in range(2)]
 
     def _measure(self, t: float, y: np.ndarray) -> tuple[float, np.ndarray]:
+        """(the ratio relative to the largest met so far, the orientation signs) at one state."""
+        ratio, signs = self._raw(t, y)
+        self.best = max(self.best, ratio) if np.isfinite(ratio) else self.best
+        return ratio / self.best if self.best > 0 else np.inf, signs
+
+    def _raw(self, t: float, y: np.ndarray) -> tuple[float, np.ndarray]:
         c, n = self.c, self.c.n
         with np.errstate(all="ignore"):
             A = c.A(float(t), y[:n], y[n:], self.p)
@@ -616,16 +625,41 @@ class PassageWatch:
         rows = [self.last] if self.last is not None else []
         rows += [(float(ti), y, *self._measure(ti, y)) for ti, y in zip(t, Y)]
         for k in range(len(rows) - 1):
-            (t0, y0, r0, s0), (t1, _y1, r1, s1) = rows[k], rows[k + 1]
+            (t0, y0, r0, s0), (t1, y1, r1, s1) = rows[k], rows[k + 1]
             if k + 2 < len(rows) and r1 < PASSAGE and r1 <= r0 and r1 <= rows[k + 2][2]:
                 self._refuse(t1, r1)
-            if min(r0, r1) < 10 * PASSAGE or bool(np.all(s0 * s1 < 0)):
-                times = np.linspace(t0, t1, 65)
-                inner = [self._measure(ti, y)[0] for ti, y in zip(times, self.integrate(y0, times))]
-                for j in range(1, 64):
-                    if inner[j] < PASSAGE and inner[j] <= inner[j - 1] and inner[j] <= inner[j + 1]:
-                        self._refuse(float(times[j]), inner[j])
+            if min(r0, r1) < 5 * PASSAGE or bool(np.all(s0 * s1 < 0)) or self._dips(t0, y0, t1, y1):
+                self._inside(t0, y0, t1)
         self.last = rows[-1]
+
+    def _inside(self, t0: float, y0: np.ndarray, t1: float, depth: int = 0) -> None:
+        """The ratio at 64 points of the integrated interval [t0, t1] from y0; its lowest local minimum is a passage
+        below PASSAGE, or (below 5 PASSAGE) looked at closer, up to three times."""
+        times = np.linspace(t0, t1, 65)
+        rows = self.integrate(y0, times)
+        inner = [self._measure(ti, y)[0] for ti, y in zip(times, rows)]
+        low = [j for j in range(1, 64) if inner[j] <= inner[j - 1] and inner[j] <= inner[j + 1]]
+        if not low:
+            return
+        j = min(low, key=lambda i: inner[i])
+        if inner[j] < PASSAGE:
+            self._refuse(float(times[j]), inner[j])
+        if inner[j] < 5 * PASSAGE and depth < 3 and np.all(np.isfinite(rows[j - 1])):
+            self._inside(float(times[j - 1]), rows[j - 1], float(times[j + 1]), depth + 1)
+
+    def _dips(self, t0: float, y0: np.ndarray, t1: float, y1: np.ndarray) -> bool:
+        """Whether the ratio dips below 5 PASSAGE along the cubic (Hermite) path through the two rows' positions and
+        rates: a cheap look inside a coarse output interval (a whirled parallelogram crosses its flattened position
+        between two rows 0.5 s apart), confirmed by integrating the interval."""
+        n, h = self.c.n, t1 - t0
+        q0, v0, q1, v1 = y0[:n], y0[n:], y1[:n], y1[n:]
+        for s in np.linspace(0.0, 1.0, 18)[1:-1]:
+            h00, h10, h01, h11 = 2*s**3 - 3*s**2 + 1, s**3 - 2*s**2 + s, -2*s**3 + 3*s**2, s**3 - s**2
+            q = h00 * q0 + h10 * h * v0 + h01 * q1 + h11 * h * v1
+            ratio, _signs = self._raw(t0 + s * h, np.concatenate([q, (1 - s) * v0 + s * v1]))
+            if self.best > 0 and ratio < 5 * PASSAGE * self.best:
+                return True
+        return False
 
     @staticmethod
     def _refuse(at: float, ratio: float) -> None:
@@ -1047,7 +1081,9 @@ def _closed_loop_scipy(job: Integration, y0: np.ndarray) -> tuple:
     k, last, h, reach = 0, len(grid) - 1, 0.0, PROJECTION_STEPS
 
     def integrate(y: np.ndarray, at: np.ndarray) -> np.ndarray:
+        calls = rhs.calls  # (the check's evaluations are not the integration's work)
         sol = solve_ivp(rhs, (float(at[0]), float(at[-1])), y, method=method, rtol=rtol, atol=atol, t_eval=at)
+        rhs.calls = calls
         return sol.y.T if sol.success and sol.y.shape[1] == len(at) else np.full((len(at), len(y)), np.nan)
 
     watch = PassageWatch(c, p, 0.0, y0, integrate)
