@@ -579,11 +579,11 @@ class PassageWatch:
     crank's rate jumping from 8.29 to -5.60 rad/s with energy kept (exit 0, no note). A fully driven loop (no
     degree of freedom) is not watched: its drives carry it on its branch.
 
-    The ratio is read at the output rows and, where an interval may hide a passage (a ratio below 5 PASSAGE at an
-    end or on the cubic path between its rows, or the loop's orientation, det(A R) for two fixed random R, reversed
-    across it), at 64 points inside it, and closer where the ratio dips below 5 PASSAGE there
-    that ``integrate(y, times)`` gives (the rows at those times from y at times[0]). ``check`` is called with each
-    solve's rows as they come, so the run stops at the first passage."""
+    The ratio is read at the output rows. Where an interval may hide a passage (a ratio below 5 PASSAGE at an end
+    or on the cubic path between its rows, or the loop's orientation, det(A R) for two fixed random R, reversed
+    across it), it is read at 64 points of the interval that ``integrate(y, times)`` gives (the rows at those times
+    from y at times[0]), and closer where it dips below 5 PASSAGE there. ``check`` is called with each solve's rows
+    as they come, so the run stops at the first passage."""
 
     def __init__(self, c: Compiled, p: np.ndarray, t0: float, y0: np.ndarray,
                  integrate: Callable[[np.ndarray, np.ndarray], np.ndarray]) -> None:
