@@ -257,21 +257,27 @@ class MechanicalModel:
         """The dampers and actuators whose length vanishes at ``coordinates`` (with ``values`` of the parameters,
         symbols to numbers), as 'the damper between A and B': along their line the force has no direction there,
         and their linearization (sympy's sign(0) = 0) drops them: a damper between a block and its anchor gave a
-        damping ratio of 0 at the rest where it is 0.1."""
-        point = {**values, **{self.doc.coords[c]: v for c, v in coordinates.items() if c in self.doc.coords},
-                 self.t: 0}
-        out = []
-        for load in self.kin.loads:
-            if load.kind in ("damper", "actuator"):
-                d = load.data["d"].xreplace(point)
-                try:
-                    length = float(sp.sqrt((d.T * d)[0]).evalf())
-                except (TypeError, ValueError):
-                    continue
-                if length <= 1e-12 * (1 + max((abs(v) for v in coordinates.values()), default=0.0)):
-                    a, b = load.data.get("between", ("?", "?"))
-                    out.append(f"the {load.kind} between {a} and {b}")
-        return out
+        damping ratio of 0 at the rest where it is 0.1. The squared lengths are compiled once per model (a sweep
+        asks at every point)."""
+        memo = self.__dict__.get("_element_lengths")
+        if memo is None:
+            elements = [load for load in self.kin.loads if load.kind in ("damper", "actuator")]
+            args = [*self.doc.coords.values(), *self.parameter_symbols, self.t]
+            squares = [sp.expand((load.data["d"].T * load.data["d"])[0]) for load in elements]
+            names = [f"the {load.kind} between {' and '.join(load.data.get('between', ('?', '?')))}"
+                     for load in elements]
+            memo = self.__dict__["_element_lengths"] = (names, sp.lambdify(args, squares, "math") if elements
+                                                        else None)
+        names, lengths = memo
+        if lengths is None:
+            return []
+        q = [coordinates.get(c, self.doc.initial.get(c, 0.0)) for c in self.doc.coords]
+        try:
+            squared = lengths(*q, *(float(values.get(s, 0.0)) for s in self.parameter_symbols), 0.0)
+        except (TypeError, ValueError, ZeroDivisionError, OverflowError):
+            return []
+        tol = 1e-12 * (1 + max((abs(v) for v in coordinates.values()), default=0.0))
+        return [name for name, l2 in zip(names, squared) if abs(l2) <= tol * tol]
 
     def nonconservative_forces(self, loads: list) -> sp.Matrix:
         """Generalized forces of the given loads' non-potential parts."""
