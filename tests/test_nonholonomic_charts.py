@@ -84,3 +84,27 @@ def test_a_ball_rolling_down_an_incline_passes_the_gimbal_lock(tmp_path, compone
     summary = json.loads(result.output)["simulation summary"]
     assert summary["x(t_end)"] == pytest.approx(5 / 14 * 9.81 * math.sin(0.3), rel=1e-8)
     assert summary["max constraint residual"] < 1e-9
+
+
+def test_steady_motions_where_the_speeds_move_no_mass_are_undecided_not_classified():
+    """A ball rolling in a bowl on the arm of a universal joint (tests/data/beyond/ball_in_bowl_universal.yaml).
+    Where the arm lies along the joint's first axis (p2 = +-pi/2), p1 only turns the arm about its own length and
+    the ball's relative angles can undo it: a combination of the speeds moves no mass. Those points were listed as
+    'unstable (critical)' with eigenvalues of 6e8; no verdict can be read there. At the bottom the ball oscillates
+    at w^2 = 5 g / (7 (R - r)) (a ball rolling in a spherical bowl, closed form)."""
+    path = Path(__file__).resolve().parent / "data" / "beyond" / "ball_in_bowl_universal.yaml"
+    result = _run("equilibria", str(path), "-f", "json")
+    assert result.exit_code == 0, result.output
+    rows = json.loads(result.output)["equilibria"]
+    singular = [e for e in rows if abs(abs(e["coordinates"]["p2"]) - math.pi / 2) < 1e-6]
+    assert singular, "the search meets the singular points"
+    for e in singular:
+        assert e["stability"] == "undecided" and not e["eigenvalues"]
+        assert e["reason"].startswith("coordinate singularity: a combination of the independent speeds moves no mass")
+    for e in rows:
+        assert all(math.hypot(*v) < 10 for v in e["eigenvalues"]), e
+    bottom = [e for e in rows if abs(e["coordinates"]["p1"]) < 1e-6 and abs(e["coordinates"]["p2"]) < 1e-6]
+    assert len(bottom) == 1
+    w = math.sqrt(5 * 9.81 / (7 * (0.6 - 0.05)))
+    oscillating = sorted(abs(v[1]) for v in bottom[0]["eigenvalues"] if abs(v[1]) > 1e-6)
+    assert oscillating == pytest.approx([w] * 4, rel=1e-9)

@@ -28,32 +28,41 @@ class Unsupported(Exception):
 
 
 def dump(exprs: Sequence[sp.Expr], symbols: Mapping[str, sp.Symbol]) -> dict:
-    """{"nodes": [...], "roots": [...]} of ``exprs``; Unsupported if a node is not on the whitelist or a symbol is
-    not one of ``symbols`` (by name and identity)."""
+    """{"nodes": [...], "roots": [...]} of ``exprs``, one node per distinct value; Unsupported if a node is not on the
+    whitelist or a symbol is not one of ``symbols`` (by name and identity). Nodes are met by identity, then merged by
+    their encoding (operation and argument indices): keying them by value compared each copy of a subexpression
+    with the first through its whole tree (a 20-link chain's equations: a tenth of `derive`)."""
     nodes: list[list] = []
-    index: dict[sp.Basic, int] = {}
+    by_encoding: dict[tuple, int] = {}
+    by_id: dict[int, int] = {}
+    alive: list[sp.Basic] = []  # the nodes whose ids are keys stay alive until the end
 
     def visit(e: sp.Basic) -> int:
-        if e in index:
-            return index[e]
-        stack = [(e, False)]
+        stack = [e]
         while stack:  # iterative post-order: deep sums of products must not exhaust Python's stack
-            node, ready = stack.pop()
-            if node in index:
+            node = stack[-1]
+            if id(node) in by_id:
+                stack.pop()
                 continue
-            if ready or not node.args or isinstance(node, (sp.Symbol, sp.Number)):
-                index[node] = len(nodes)
-                nodes.append(_encode(node, index, symbols))
+            args = () if isinstance(node, (sp.Symbol, sp.Number)) else node.args
+            waiting = [a for a in args if id(a) not in by_id]
+            if waiting:
+                stack.extend(reversed(waiting))
                 continue
-            stack.append((node, True))
-            stack.extend((a, False) for a in reversed(node.args) if a not in index)
-        return index[e]
+            stack.pop()
+            encoded = _encode(node, by_id, symbols)
+            k = by_encoding.setdefault(tuple(encoded), len(nodes))
+            if k == len(nodes):
+                nodes.append(encoded)
+            by_id[id(node)] = k
+            alive.append(node)
+        return by_id[id(e)]
 
     roots = [visit(sp.sympify(e)) for e in exprs]
     return {"nodes": nodes, "roots": roots}
 
 
-def _encode(e: sp.Basic, index: dict, symbols: Mapping[str, sp.Symbol]) -> list:
+def _encode(e: sp.Basic, by_id: dict[int, int], symbols: Mapping[str, sp.Symbol]) -> list:
     if isinstance(e, sp.Symbol):
         if symbols.get(e.name) is not e and symbols.get(e.name) != e:
             raise Unsupported(f"symbol {e.name!r} is not one of the model's")
@@ -72,7 +81,7 @@ def _encode(e: sp.Basic, index: dict, symbols: Mapping[str, sp.Symbol]) -> list:
     name = _NAMES.get(e.func)
     if name is None or e.func is not OPERATIONS[name]:
         raise Unsupported(f"{type(e).__name__} is not on the whitelist")
-    return [name, *(index[a] for a in e.args)]
+    return [name, *(by_id[id(a)] for a in e.args)]
 
 
 def load(data: object, symbols: Mapping[str, sp.Symbol]) -> list[sp.Expr] | None:

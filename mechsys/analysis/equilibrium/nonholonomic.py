@@ -795,6 +795,14 @@ class NonholonomicProblem(EquilibriumProblem):
         vals = lin.eigenvalues
         e.eigenvalues, e.jacobian = vals, lin.jacobian
         e.structural = lin.structural_text()
+        if _massless_speeds(lin.M):
+            e.eigenvalues, e.jacobian, e.critical = np.zeros(0, complex), None, False
+            e.stability = "undecided"
+            e.reason = ("coordinate singularity: a combination of the independent speeds moves no mass at this "
+                        "steady motion, while the equations of motion are regular elsewhere (e.g. a universal "
+                        "joint whose arm lies along its first axis): the coordinates are a singular chart here and "
+                        "no verdict is read from them; write the joint so that this position is regular")
+            return
         scale = max(1.0, float(np.max(np.abs(vals)))) if len(vals) else 1.0
         tol = 1e-9 * scale
         zero_like = zero_like_eigenvalues(vals, scale)
@@ -815,6 +823,24 @@ class NonholonomicProblem(EquilibriumProblem):
                 e.stability = "stable"
                 e.reason = (f"{zero} eigenvalue(s) with zero real part{apart}; conservative system with a purely "
                             "oscillatory, simple spectrum: stable in the linear sense")
+
+
+#: The smallest eigenvalue of the reduced mass matrix scaled to a unit diagonal below which a combination of the
+#: independent speeds carries no mass (a ball in a bowl on a universal joint whose arm lies along the joint's first
+#: axis: 2e-16, where its eigenvalues, 6e8, were printed with a verdict; 0.3 and more at regular points).
+MASSLESS_RTOL = 1e-9
+
+
+def _massless_speeds(Mr: np.ndarray) -> bool:
+    """Whether the reduced mass matrix is singular, measured in each speed's own size (a unit diagonal), so that
+    speeds of very different units (a MEMS part beside a metre one) are not mistaken for a singular matrix."""
+    if not Mr.size:
+        return False
+    d = np.sqrt(np.abs(np.diag(Mr)))
+    if not np.all(np.isfinite(Mr)) or np.any(d <= 1e-150 * max(1e-300, float(np.max(d)))):
+        return bool(np.all(np.isfinite(Mr)))
+    scaled = Mr / d[:, None] / d[None, :]
+    return float(np.min(np.linalg.eigvalsh((scaled + scaled.T) / 2))) <= MASSLESS_RTOL
 
 
 def _conservative(problem: NonholonomicProblem, p: np.ndarray) -> bool:
