@@ -378,7 +378,7 @@ class MechanicalModel:
                 M, f = self._lagrange() if method == "lagrange" else self._kane()
                 eq = Equations(method, self.coordinates, self.q, self.u, self.a, M, f, self.generalized_forces,
                                self.kinetic_energy, self.potential_energy, self.constraint_jacobian,
-                               self.constraint_rhs, [c.name for c in self.kin.constraints]).interned()
+                               self.constraint_rhs, [c.name for c in self.kin.constraints])
                 derivations.store(self, eq)
             self._eqs[method] = eq
         return self._eqs[method]

@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
 
+from mechsys.analysis.motion.jumps import refuse_jumps
 from mechsys.errors import AnalysisError, InputError
 from mechsys.numeric import saddle
 from mechsys.numeric.native import BUDGET_SPENT, budget_spent
@@ -936,35 +937,6 @@ def _frictionless_rest(model: MechanicalModel, c: Compiled, p: np.ndarray, reste
             f"(friction acts in the impulses only, docs/collide.md), so the bodies slide freely along it"]
 
 
-def _refuse_velocity_jumps(model: MechanicalModel, p: np.ndarray, t_end: float) -> None:
-    """An error when a prescribed motion's velocity jumps within [0, t_end] (its acceleration holds a DiracDelta
-    whose argument vanishes there: abs, sign, Heaviside, Max or Min of t). The jump is an impulse on the bodies it
-    carries, which the integration does not apply: a pendulum on a cart prescribed as abs(t - 0.5) stayed at rest
-    where the reversal throws it to -3.6 rad/s."""
-    import sympy as sp
-
-    from mechsys.model.load import T
-
-    motions = {**model.doc.prescribed, **model.doc.released}
-    if not motions:
-        return
-    values = {sym: sp.Float(v) for sym, v in zip(model.parameter_symbols, p)}
-    grid = np.linspace(0.0, t_end, 4001)
-    for name, motion in motions.items():
-        acceleration = sp.diff(sp.sympify(motion).xreplace(values), T, 2)
-        for delta in acceleration.atoms(sp.DiracDelta):
-            arg = sp.lambdify(T, delta.args[0], "numpy")
-            with np.errstate(all="ignore"):
-                g = np.broadcast_to(np.asarray(arg(grid), dtype=float), grid.shape)
-            hits = np.flatnonzero((g[:-1] * g[1:] <= 0) & np.isfinite(g[:-1]) & np.isfinite(g[1:]))
-            if hits.size:
-                raise AnalysisError(
-                    f"the prescribed motion of {name} ({motion}) changes its velocity by a jump near t = "
-                    f"{grid[hits[0]]:.6g} s: an impulse on what it carries, which simulate does not apply; smooth "
-                    "the motion (abs(t - a) as sqrt((t - a)**2 + e**2), a ramp with a blend), or simulate up to the "
-                    "jump (--t-end)")
-
-
 def _refuse_singular_chart(c: Compiled, q: np.ndarray) -> None:
     """An error when the start is at a gimbal lock of a rotation chart. The runs that can re-chart start in another
     sequence (charted.py) and never get here at a lock; without constraints the singular mass matrix stops the
@@ -1191,8 +1163,8 @@ def integrate(model: MechanicalModel, options: SimulationOptions, overrides_p: n
         timings["derive + compile" if not getattr(c, "cache_hit", False) else "load compiled code (cached)"] = \
             time.perf_counter() - t0
         p = parameter_values(model) if overrides_p is None else overrides_p
-        _refuse_velocity_jumps(model, p, t_end)
         q0, u0, warnings = _start(model, c, p)
+        refuse_jumps(model, p, q0, t_end)
         unwatched = [entry["name"] for entry in model.kin.contacts if entry["gap"] is None]
         if unwatched:
             warnings.append(f"contact {', '.join(repr(n) for n in unwatched)} (between two points, without a gap) is "
