@@ -642,3 +642,76 @@ def test_modes_say_that_the_stable_rest_was_found_at_the_lock():
     note = json.loads(cli("modes", BEYOND / "box_on_springs_zxz.yaml", "-f", "json"))["note"]
     assert "the stable equilibrium found" in note and "z = 0.154723" in note and "coordinate singularity" in note
     assert "found no stable" not in note
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Time written where a few random times do not see it (a step, a ramp) or in a constraint
+
+_SPIN_ARM = """name: spinarm
+parameters: {{M: 2.0, a: 0.4, m: 1.5, L: 0.6, g: 9.81, W: 7.0}}
+coordinates:
+  psi: {psi}
+  theta: {{initial: 0.3}}
+links:
+  arm:
+    joint: {{type: revolute, parent: ground, axis: y, coordinate: psi}}
+    mass: M
+    center_of_mass: [a/2, 0, 0]
+  rod:
+    joint: {{type: revolute, parent: arm, axis: z, coordinate: theta, origin: [a, 0, 0]}}
+    mass: m
+    center_of_mass: [0, -L/2, 0]
+    shape: {{rod: {{length: L, axis: y}}}}
+forces:
+  - {{type: gravity, acceleration: [0, -g, 0]}}
+{constraints}"""
+
+
+def test_a_drive_written_as_a_constraint_that_moves_with_time_has_no_rests(tmp_path):
+    """A rod pendulum on an arm held by the constraint psi - W*t. Its velocity row psi' - W has no t in it, so the
+    model passed for autonomous: the constraint was read at t = 0 and `equilibria` listed the pendulum on an arm at
+    rest (theta = 0 at sqrt(3g/2L) = 4.95 rad/s) where the arm spins at W. No configuration satisfies it at rest:
+    refused, naming the constraint; `info` calls the model rheonomic. Written as a prescribed spin (the remedy the
+    message gives), its relative rests are the stationary points of the effective potential
+    U = -m g (L/2) cos(theta) - W^2/2 (m (a + (L/2) sin(theta))^2 + m L^2/12 sin^2(theta)) (own derivation)."""
+    from scipy.optimize import brentq
+
+    held = tmp_path / "held.yaml"
+    held.write_text(_SPIN_ARM.format(psi="{initial: 0, rate: W}",
+                                     constraints="constraints:\n  - {type: holonomic, name: spin, expression: psi - W*t}\n"))
+    result = runner.invoke(app, ["equilibria", str(held)])
+    assert result.exit_code == 1
+    assert "the constraint 'spin' moves with time" in result.output
+    assert "make it prescribed" in result.output
+    info = runner.invoke(app, ["info", str(held)])
+    assert info.exit_code == 0 and "rheonomic, non-autonomous" in info.output
+
+    prescribed = tmp_path / "prescribed.yaml"
+    prescribed.write_text(_SPIN_ARM.format(psi='{prescribed: "W*t"}', constraints=""))
+    m, a, L, g, W = 1.5, 0.4, 0.6, 9.81, 7.0
+
+    def dU(th):
+        return m * g * L / 2 * math.sin(th) - W ** 2 * (m * (a + L / 2 * math.sin(th)) * L / 2 * math.cos(th)
+                                                       + m * L ** 2 / 12 * math.sin(th) * math.cos(th))
+
+    grid = np.linspace(-math.pi, math.pi, 2001)
+    roots = sorted(brentq(dU, x, y, xtol=1e-14) for x, y in zip(grid[:-1], grid[1:]) if dU(x) * dU(y) < 0)
+    data = json.loads(runner.invoke(app, ["equilibria", str(prescribed), "-f", "json"]).output)
+    found = sorted(e["coordinates"]["theta"] for e in data["equilibria"])
+    assert found == pytest.approx(roots, abs=1e-8)
+    assert roots[1] == pytest.approx(1.32190, abs=1e-5)
+
+
+@pytest.mark.parametrize("force", ["F0*(1 + sign(t - t1))/2", "F0*min(max(t - t1, 0), 1)"])
+def test_a_step_or_ramp_in_time_is_time_dependence(tmp_path, force):
+    """A block on a spring loaded by a step (or a ramp) at t1 = 2 s. d/dt at four random times in [-1.3, 1.7] was zero
+    each time (before the step, or a DiracDelta evaluated as 0), so the model passed for autonomous and `equilibria`
+    gave the unloaded rest x = 0; `info` said autonomous."""
+    path = tmp_path / "step.yaml"
+    path.write_text("name: step\nparameters: {m: 1, k: 100, c: 2, F0: 10, t1: 2}\ncoordinates:\n  x: {initial: 0}\n"
+                    "links:\n  block:\n    joint: {type: prismatic, parent: ground, axis: x, coordinate: x}\n"
+                    "    mass: m\nforces:\n  - {type: torsional_spring, coordinate: x, stiffness: k}\n"
+                    f"  - {{type: generalized_force, coordinate: x, value: \"{force}\"}}\n")
+    result = runner.invoke(app, ["equilibria", str(path)])
+    assert result.exit_code == 1 and "non-autonomous" in result.output
+    assert "non-autonomous" in runner.invoke(app, ["info", str(path)]).output

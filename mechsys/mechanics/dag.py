@@ -272,6 +272,34 @@ def precise(expr: sp.Basic, values: Mapping[sp.Symbol, float], digits: int) -> O
         return None
 
 
+#: functions whose value (or whose derivative) jumps where their argument changes sign
+SWITCHING = (sp.Abs, sp.sign, sp.Heaviside, sp.DiracDelta)
+
+
+def switches(exprs: Iterable[sp.Basic], x: sp.Symbol) -> list[sp.Expr]:
+    """Functions of ``x`` whose sign changes mark where the expressions may jump or kink: the arguments of their
+    abs, sign, Heaviside and DiracDelta nodes, the differences of a Min's or Max's arguments, a Piecewise's conditions
+    (lhs - rhs), each shared node visited once; only those that contain ``x``."""
+    from itertools import combinations
+
+    out: list[sp.Expr] = []
+    seen: set[int] = set()
+    stack = [sp.sympify(e) for e in exprs]
+    while stack:
+        node = stack.pop()
+        if id(node) in seen or not node.args:
+            continue
+        seen.add(id(node))
+        if isinstance(node, SWITCHING):
+            out.append(node.args[0])
+        elif isinstance(node, (sp.Min, sp.Max)):
+            out += [a - b for a, b in combinations(node.args, 2)]
+        elif isinstance(node, sp.Piecewise):
+            out += [r.lhs - r.rhs for _, cond in node.args for r in sp.sympify(cond).atoms(sp.core.relational.Relational)]
+        stack.extend(node.args)
+    return [s for s in out if s.has(x)]
+
+
 def identically_zero(expr: sp.Expr, values: dict) -> bool:
     """True when ``expr`` vanishes structurally, or at several random states (then it is identically 0). Scale-free:
     a value beyond the round-off of its largest term settles "not zero"; a smaller one is computed at 30 and at 60

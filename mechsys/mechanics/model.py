@@ -441,16 +441,28 @@ class MechanicalModel:
 
     @cached_property
     def is_rheonomic(self) -> bool:
-        """Time in the kinematics: a frame's pose or a constraint row (a prescribed coordinate used only in a force
-        leaves them alone: scleronomic, non-autonomous)."""
+        """Time in the kinematics: a frame's pose, a constraint row, or a constraint that moves with time (a
+        holonomic one written with t, psi - W*t, whose velocity row psi' - W has no t left in it); a prescribed
+        coordinate used only in a force leaves them alone: scleronomic, non-autonomous."""
         exprs = [f.origin for f in self.kin.frames.values()] + [f.R for f in self.kin.frames.values()]
         exprs += [c.velocity for c in self.kin.constraints]
-        return any(self.t in sp.sympify(e).free_symbols for e in exprs)
+        return any(self.t in sp.sympify(e).free_symbols for e in exprs) or bool(self.moving_constraints)
+
+    @cached_property
+    def moving_constraints(self) -> list[str]:
+        """The holonomic constraints that depend on time (d/dt at fixed coordinates is not zero: x - v*t): no
+        configuration satisfies them at rest."""
+        from mechsys.mechanics.dag import identically_zero
+
+        values = {s: self.parameters[s.name] for s in self.parameter_symbols}
+        return [c.name for c in self.kin.constraints if c.kind == "holonomic" and c.position is not None
+                and c.position.has(self.t) and not identically_zero(self.diff(c.position, self.t), values)]
 
     def is_autonomous(self, method: str = INTERNAL_METHOD) -> bool:
-        """No explicit t in M, f, A, b. Decided symbolically when t is absent, else by d/dt = 0 at random states to
-        the rounding of its terms (constant prescribed spins leave cos(W t)**2 + sin(W t)**2, which is never
-        simplified on this path).
+        """No explicit t in M, f, A, b and no holonomic constraint that moves with time (moving_constraints).
+        Decided symbolically when t is absent; a step or kink in t (abs, sign, min, max of t) is time dependence;
+        else by d/dt = 0 at random states to the rounding of its terms (constant prescribed spins leave
+        cos(W t)**2 + sin(W t)**2, which is never simplified on this path).
         Remembered per model object and on disk (mechanics/derivations.py)."""
         memo = self.__dict__.setdefault("_autonomous", {})
         if method not in memo:
@@ -463,9 +475,16 @@ class MechanicalModel:
         eq = self.equations(method)
         symbols = FreeSymbols()
         parts = [m for m in (eq.M, eq.f, eq.A, eq.b) if m.shape[0] and self.t in symbols.of_all(m)]
+        if self.moving_constraints:
+            return False
         if not parts:
             return True
-        from mechsys.mechanics.dag import identically_zero
+        from mechsys.mechanics.dag import identically_zero, switches
+
+        # a step or kink in t (min(t, T), sign(t - t1)) is time dependence that d/dt at a few random times misses:
+        # its derivative is zero or a DiracDelta almost everywhere (a hoop spun up over [0, 1] s, a step load)
+        if switches([e for part in parts for e in part], self.t):
+            return False
 
         # d/dt of each entry with t vanishes at random states, to the rounding of its own terms (dag: at any units;
         # against max(1, |value|) a MEMS pivot driven at 1.8 m/s^2 was taken for autonomous)

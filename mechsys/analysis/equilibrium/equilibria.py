@@ -108,6 +108,23 @@ def _contains(exprs: list, kinds: tuple) -> bool:
     return False
 
 
+def refuse_time_dependence(model: MechanicalModel, method: str, what: str) -> None:
+    """An AnalysisError when the model depends explicitly on time: a holonomic constraint that moves with time (no
+    configuration satisfies x - v*t at rest; it was read at t = 0, and the arm it drives found at rest), or t in the
+    equations of motion (model.is_autonomous)."""
+    moving = model.moving_constraints
+    if moving:
+        one = len(moving) == 1
+        raise AnalysisError(
+            f"the constraint{'' if one else 's'} {', '.join(repr(n) for n in moving)} move{'s' if one else ''} with "
+            f"time (d/dt at fixed coordinates is not zero): no configuration satisfies {'it' if one else 'them'} at "
+            f"rest, so there are no {what} in the ordinary sense; for steady motions relative to a coordinate driven "
+            "at a constant rate, make it prescribed (psi: {prescribed: W*t})")
+    if not model.is_autonomous(method):
+        raise AnalysisError(f"the equations depend explicitly on time (non-autonomous): there are no {what} in the "
+                            "ordinary sense")
+
+
 class EquilibriumProblem:
     """The algebraic equations of rest: f(q, u) + A^T lambda = 0 and Phi(q) = 0, with u = 0 except the steady
     rates of cyclic coordinates, which are unknowns (or fixed at their initial rate when the system leaves
@@ -120,9 +137,7 @@ class EquilibriumProblem:
         self.model = model
         if not model.is_holonomic:
             raise AnalysisError("equilibria of nonholonomic systems are not supported")
-        if not model.is_autonomous():
-            raise AnalysisError("the equations depend explicitly on time (non-autonomous): there are no "
-                                "equilibria in the ordinary sense")
+        refuse_time_dependence(model, INTERNAL_METHOD, "equilibria")
         self.eq = model.equations(INTERNAL_METHOD)
         ignorable = model.cyclic_coordinates()
         self.cyclic = [c for c in ignorable if not model.kin.constraints]

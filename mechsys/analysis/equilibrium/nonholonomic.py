@@ -30,7 +30,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 import sympy as sp
 
-from mechsys.analysis.equilibrium.equilibria import Equilibrium, EquilibriumProblem, newton_scales, wrap
+from mechsys.analysis.equilibrium.equilibria import (Equilibrium, EquilibriumProblem, newton_scales,
+                                                     refuse_time_dependence, wrap)
 from mechsys.analysis.equilibrium.stability import zero_like_eigenvalues
 from mechsys.numeric.parameters import parameter_values
 from mechsys.errors import AnalysisError, InputError
@@ -423,9 +424,7 @@ class NonholonomicProblem(EquilibriumProblem):
         self.model = model
         self.method = method
         self.pieces = constrained_pieces(model, method)
-        if not model.is_autonomous(method):
-            raise AnalysisError("the equations depend explicitly on time (non-autonomous): there are no "
-                                "steady motions in the ordinary sense")
+        refuse_time_dependence(model, method, "steady motions")
         names = model.coordinates
         p = parameter_values(model)
         q0 = np.array([model.doc.initial.get(c, 0.0) for c in names], dtype=float)

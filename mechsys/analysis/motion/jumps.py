@@ -2,20 +2,19 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from itertools import combinations
 from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 import sympy as sp
 
 from mechsys.errors import AnalysisError
+from mechsys.mechanics.dag import switches
 
 if TYPE_CHECKING:
     from mechsys.mechanics.model import MechanicalModel
 
 #: Points of the grid on which the switching functions' sign changes are sought (then refined by bisection).
 GRID = 4001
-_NONSMOOTH = (sp.Abs, sp.sign, sp.Heaviside, sp.DiracDelta)
 
 
 @dataclass(frozen=True)
@@ -28,21 +27,6 @@ class Driven:
     position: bool
 
 
-def _switches(expr: sp.Expr, T: sp.Symbol) -> list[sp.Expr]:
-    """Functions of t whose sign changes mark where ``expr`` may jump or kink: the arguments of its non-smooth
-    functions (the differences of a Min's or Max's arguments, a Piecewise's conditions)."""
-    out: list[sp.Expr] = []
-    for node in sp.preorder_traversal(expr):
-        if isinstance(node, _NONSMOOTH):
-            out.append(node.args[0])
-        elif isinstance(node, (sp.Min, sp.Max)):
-            out += [a - b for a, b in combinations(node.args, 2)]
-        elif isinstance(node, sp.Piecewise):
-            out += [r.lhs - r.rhs for _, cond in node.args
-                    for r in sp.sympify(cond).atoms(sp.core.relational.Relational)]
-    return [s for s in out if s.has(T)]
-
-
 def driven(model: MechanicalModel) -> list[Driven]:
     """The time-dependent kinematics written with abs, sign, min, max (...) of t: prescribed motions, frame poses
     (a joint `origin` or transform step with t), holonomic constraints, and velocity constraints at rest."""
@@ -51,7 +35,7 @@ def driven(model: MechanicalModel) -> list[Driven]:
     seen: set = set()
 
     def add(what: str, expr: sp.Expr, position: bool) -> None:
-        if expr.has(T) and expr not in seen and _switches(expr, T):
+        if expr.has(T) and expr not in seen and switches([expr], T):
             seen.add(expr)
             out.append(Driven(what, expr, position))
 
@@ -134,7 +118,7 @@ def refuse_jumps(model: MechanicalModel, p: np.ndarray, q0: np.ndarray, t_end: f
         for level, expr in levels:
             expr = expr.replace(sp.DiracDelta, lambda *args: sp.Integer(0))  # the jump itself is what is sought
             f = sp.lambdify(T, expr, "numpy")
-            for s in _switches(expr, T):
+            for s in switches([expr], T):
                 for tc in _roots(sp.lambdify(T, s, "numpy"), t_end):
                     size, before, after = _jump(f, tc)
                     if size and (first is None or tc < first[0]):
