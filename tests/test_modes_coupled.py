@@ -5,6 +5,7 @@ Jeffcott rotor above its stability threshold (growing motion with positive modal
 from __future__ import annotations
 
 import json
+import math
 
 import numpy as np
 import pytest
@@ -136,3 +137,35 @@ def test_a_damper_of_zero_length_at_the_rest_is_refused_not_dropped(tmp_path):
     (e,) = cli_json("equilibria", str(together))["equilibria"]
     assert e["coordinates"]["x"] == pytest.approx(0.0, abs=1e-12) and e["stability"] == "undecided"
     assert "zero length" in e["reason"]
+
+
+def test_the_split_zero_eigenvalues_of_a_tops_cyclic_angles_are_no_damped_frequency():
+    """A heavy symmetric top (A = 2e-3 about the pivot, C = 1e-3, m g l = 0.24525) precessing steadily at psi' = 4.2
+    with phi' = 60. Its two cyclic angles give two double zero eigenvalues; rounding split one into +-6.9e-8 i, which
+    `modes` named as a frequency of the motion and `sweep --run modes` (or `check`) reported as damped1.frequency
+    instead of the nutation. Own derivation: with p_psi, p_phi conserved, the nutation is theta'' = -U'(theta)/A with
+    U = (p_psi - p_phi cos(theta))^2 / (2 A sin^2(theta)) + m g l cos(theta); its frequency is sqrt(U''(theta0)/A)."""
+    import sympy as sp
+
+    import mechsys
+    from mechsys.analysis.batch.tasks import ANALYSES
+
+    path = DATA_DIR / "beyond" / "top_pivot_moments.yaml"
+    result = runner.invoke(app, ["modes", str(path), "--set", "der(psi)=4.2", "-f", "json"])
+    assert result.exit_code == 0, result.output
+    data = json.loads(result.output)
+    theta0 = data["equilibrium"]["coordinates"]["theta"]
+    A, C, mgl, psi_rate, phi_rate = 2e-3, 1e-3, 0.5 * 9.81 * 0.05, 4.2, 60.0
+    th = sp.Symbol("theta")
+    w3 = psi_rate * math.cos(theta0) + phi_rate
+    p_phi = C * w3
+    p_psi = A * psi_rate * math.sin(theta0) ** 2 + p_phi * math.cos(theta0)
+    U = (p_psi - p_phi * sp.cos(th)) ** 2 / (2 * A * sp.sin(th) ** 2) + mgl * sp.cos(th)
+    assert float(U.diff(th).subs(th, theta0)) == pytest.approx(0, abs=1e-9)  # a steady precession
+    nutation = math.sqrt(float(U.diff(th, 2).subs(th, theta0)) / A)
+    assert nutation == pytest.approx(27.860829, abs=1e-6)
+    assert f"|Im λ| = {nutation:.7g} rad/s" in data["coupling"]
+    model = mechsys.load(path, overrides={"der(psi)": 4.2})
+    row = ANALYSES["modes"](model, {})
+    assert row["damped1.frequency"] == pytest.approx(nutation, rel=1e-9)
+    assert "damped2.frequency" not in row

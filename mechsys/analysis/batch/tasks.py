@@ -57,6 +57,7 @@ def _equilibria(model: MechanicalModel, options: dict) -> Outputs:
 
 def _modes(model: MechanicalModel, options: dict) -> Outputs:
     from mechsys.analysis.equilibrium.modes import vibration_modes
+    from mechsys.analysis.equilibrium.stability import oscillating_eigenvalues
 
     m = vibration_modes(model, options.get("at"))
     out: Outputs = {"modes": len(m.frequencies)}
@@ -66,8 +67,7 @@ def _modes(model: MechanicalModel, options: dict) -> Outputs:
     # the damped eigenvalues: with gyroscopic or circulatory terms the motion's own frequencies, which the modes'
     # (of M and the symmetric K) are not; a Campbell diagram reads these
     out["coupling"] = m.coupling.split(" terms")[0] if m.coupling else "none"
-    top = max(1.0, float(np.max(np.abs(m.eigenvalues)))) if len(m.eigenvalues) else 1.0
-    oscillating = sorted((v for v in m.eigenvalues if v.imag > 1e-9 * top), key=lambda v: v.imag)
+    oscillating = oscillating_eigenvalues(m.eigenvalues, 2 * sum(map(bool, m.rigid_body)))
     for k, v in enumerate(oscillating, start=1):
         out[f"damped{k}.frequency"] = float(v.imag)
         out[f"damped{k}.decay_rate"] = float(-v.real)

@@ -12,7 +12,7 @@ from mechsys.analysis.equilibrium.equilibria import (Equilibrium, EquilibriumPro
                                                       is_isolated, settle)
 from mechsys.numeric.parameters import parameter_values
 from mechsys.analysis.equilibrium.linearize import Linearization, linearize
-from mechsys.analysis.equilibrium.stability import zero_length_reason, zero_like_eigenvalues
+from mechsys.analysis.equilibrium.stability import oscillating_eigenvalues, zero_length_reason, zero_like_eigenvalues
 from mechsys.errors import AnalysisError, InputError
 from mechsys.mechanics.model import MechanicalModel
 
@@ -325,7 +325,8 @@ def vibration_modes(model: MechanicalModel, at: dict[str, float] | None = None,
     damped = _damped_condensed(red, condensed)
     if damped:
         note = "; ".join(x for x in (note, damped) if x)
-    return Modes(names, e, freqs, shapes, rigid, zeta, vals, condensed, unstable, red, note, _coupling(red, vals))
+    return Modes(names, e, freqs, shapes, rigid, zeta, vals, condensed, unstable, red, note,
+                 _coupling(red, vals, 2 * sum(map(bool, rigid))))
 
 
 def _damped_condensed(red: ReducedSystem, condensed: list[str]) -> str:
@@ -358,10 +359,11 @@ def _rigid(w2: np.ndarray, phi: np.ndarray, K: np.ndarray, M: np.ndarray) -> lis
             for i, x in enumerate(w2)]
 
 
-def _coupling(red: ReducedSystem, eigenvalues: np.ndarray) -> str:
+def _coupling(red: ReducedSystem, eigenvalues: np.ndarray, zeros: int = 0) -> str:
     """A note when gyroscopic (skew C) or circulatory (skew K) terms act: the natural frequencies are those of M
     and the symmetric K alone, and the motion oscillates at the damped eigenvalues' frequencies instead (a conical
-    pendulum at 4 rad/s: 3.159944 rad/s from (K, M), 5.834747 rad/s in fact)."""
+    pendulum at 4 rad/s: 3.159944 rad/s from (K, M), 5.834747 rad/s in fact). ``zeros``: the zero eigenvalues of the
+    rigid-body modes (oscillating_eigenvalues)."""
     M, C, K = red.M, red.C, red.K
     if not M.size:
         return ""
@@ -371,8 +373,7 @@ def _coupling(red: ReducedSystem, eigenvalues: np.ndarray) -> str:
              if float(np.max(np.abs(X))) > 1e-9 * size]
     if not terms:
         return ""
-    top = max(1.0, float(np.max(np.abs(eigenvalues)))) if eigenvalues.size else 1.0
-    found = sorted({round(float(abs(v.imag)), 12) for v in eigenvalues if abs(v.imag) > 1e-9 * top})
+    found = sorted({round(v.imag, 12) for v in oscillating_eigenvalues(eigenvalues, zeros)})
     shown = ", ".join(f"{w:.7g}" for w in found[:8]) + (", ..." if len(found) > 8 else "")
     where = f"|Im λ| = {shown} rad/s" if found else "no oscillating eigenvalue"
     return (f"{' and '.join(terms)} terms couple the coordinates: the frequencies above are those of M and the "

@@ -247,6 +247,18 @@ def zero_length_reason(lost: list[str]) -> str:
             "no direction, so the linearization does not hold it (attach it between points that stay apart)")
 
 
+def oscillating_eigenvalues(vals: np.ndarray, zeros: int = 0) -> list[complex]:
+    """The eigenvalues with a positive imaginary part, by increasing frequency, less those among the ``zeros``
+    smallest in size that lie within SPLIT_ZERO of zero: ``zeros`` = 2 per rigid-body mode, whose double zero
+    eigenvalue rounding splits (a top with two cyclic angles: +-6.9e-8 i beside 27.86 rad/s, read as a first damped
+    frequency)."""
+    vals = np.asarray(vals, dtype=complex)
+    top = max(1.0, float(np.max(np.abs(vals)))) if vals.size else 1.0
+    split = {int(k) for k in np.argsort(np.abs(vals))[:zeros] if abs(vals[k]) <= SPLIT_ZERO * top}
+    return sorted((complex(v) for k, v in enumerate(vals) if k not in split and v.imag > 1e-9 * top),
+                  key=lambda v: v.imag)
+
+
 def zero_like_eigenvalues(vals: np.ndarray, scale: float) -> np.ndarray:
     """Which eigenvalues count as zero in the critical case: a real part within ZERO_RE of the scale, or a positive
     real part on an eigenvalue within SPLIT_ZERO of it (a double zero eigenvalue split by rounding: a spinning chain
