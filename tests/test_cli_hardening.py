@@ -374,3 +374,16 @@ def test_overflowing_linearizations_are_reasoned_not_internal_errors(tmp_path):
     assert result.exit_code == 0, result.output
     verdicts = {(e["stability"], e["reason"].split(" (")[0]) for e in json.loads(result.stdout)["equilibria"]}
     assert ("undecided", "the linearized equations are not finite here") in verdicts
+
+
+@pytest.mark.parametrize("force", ["{type: torsional_damper, coordinate: psi, coefficient: 0.1}",
+                                   "{type: generalized_force, coordinate: psi, value: 1}"])
+def test_a_damper_or_force_on_a_prescribed_coordinate_is_one_line_with_the_key(tmp_path, force):
+    """yaml-reference.md §12.8 and §12.9 (they said 'ignored'): exit 2 naming the file, line and key."""
+    path = tmp_path / "arm.yaml"
+    path.write_text("name: arm\ncoordinates:\n  psi: {prescribed: 2*t}\n  th: {initial: 0.1}\nlinks:\n  arm:\n"
+                    "    joint: {type: revolute, parent: ground, axis: z, coordinate: psi}\n  rod:\n"
+                    "    joint: {type: revolute, parent: arm, axis: y, coordinate: th}\n    mass: 1\n"
+                    f"    center_of_mass: [0.1, 0, 0]\nforces:\n  - {force}\n")
+    line = one_line(invoke("info", path))
+    assert "arm.yaml:13:" in line and "forces[0].coordinate: coordinate 'psi' is prescribed" in line
