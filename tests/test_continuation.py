@@ -709,3 +709,25 @@ def test_parameters_defined_from_a_swept_one_follow_it_and_an_override_cuts_the_
     again = dict(zip(names, parameter_values(fixed, {"Mo": 70.0})))
     assert again["Mo"] == 70.0 and again["dM"] == 2.0
     assert dict(zip(names, parameter_values(model, {"Mo": 14.0})))["dM"] == pytest.approx(2.0)
+
+
+def test_the_sleeping_tops_collision_is_found_in_zxz_angles_too(tmp_path):
+    """The same top written in zxz angles: upright is their gimbal lock, where continuation's eigenvalues are those
+    of the singular chart. The verdicts (classified in a regular chart) turned from unstable to stable with no event
+    reported (helper audit). The change is now located on the regular chart's verdicts: a collision at
+    w_c = 2 sqrt(A m g l) / C, as in xyz angles."""
+    import math
+
+    import mechsys
+    from mechsys.analysis.equilibrium.bifurcation import sweep
+    from tests.helpers import DATA_DIR
+
+    text = (DATA_DIR / "sleeping_top_xyz.yaml").read_text().replace("sequence: xyz", "sequence: zxz")
+    path = tmp_path / "sleeping_top_zxz.yaml"
+    path.write_text(text)
+    model = mechsys.load(path)
+    P = model.parameters
+    w_c = 2.0 * math.sqrt((P["At"] + P["m"] * P["l"] ** 2) * P["m"] * P["g"] * P["l"]) / P["C"]
+    result = sweep(model, "w", 20.0, 40.0, 11)
+    upright = [e for e in result.bifurcations if abs(e["coordinates"]["b"]) < 1e-12]
+    assert [e["kind"] for e in upright] == ["collision"] and upright[0]["value"] == pytest.approx(w_c, abs=1e-6)

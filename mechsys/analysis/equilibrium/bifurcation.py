@@ -8,9 +8,9 @@ from typing import TYPE_CHECKING, Callable
 import numpy as np
 import sympy as sp
 
-from mechsys.analysis.equilibrium.continuation import Branch, Undefined, sweep_parameter
-from mechsys.analysis.equilibrium.equilibria import (EquilibriumProblem, drop_singular, is_isolated, make_problem,
-                                                     singular_note, solve_equilibria, wrap)
+from mechsys.analysis.equilibrium.continuation import Bifurcation, Branch, Undefined, sweep_parameter
+from mechsys.analysis.equilibrium.equilibria import (Equilibrium, EquilibriumProblem, drop_singular, is_isolated,
+                                                     make_problem, singular_note, solve_equilibria, wrap)
 from mechsys.analysis.equilibrium.stability import ZERO_RE, assess, pencil_eigenvalues
 from mechsys.errors import AnalysisError, InputError
 from mechsys.mechanics.model import MechanicalModel
@@ -319,6 +319,9 @@ def sweep(model: MechanicalModel, name: str, start: float, stop: float, points: 
         for bif in branch.bifurcations:
             bif.x = system.D * bif.x
     artefacts = {id(b) for b in _review(problem, branches, par.at, name)}
+    for branch in branches:
+        if id(branch) not in artefacts:
+            branch.bifurcations += _changes_at_locks(problem, branch, par.at)
     states: dict = {}  # physical states of branch points, shared by the pairs compared
     twins = {id(b) for k, b in enumerate(branches) if id(b) not in artefacts
              and any(id(a) not in artefacts and _same_family(problem, a, b, par.at, states) for a in branches[:k])}
@@ -433,6 +436,68 @@ def _verdicts(problem: EquilibriumProblem, branch: Branch, at) -> tuple[list[str
                 e.stability = "undecided"
         verdicts.append(e.stability)
     return verdicts, bad
+
+
+def _verdict_at(problem: EquilibriumProblem, x: np.ndarray, P: np.ndarray) -> Equilibrium | None:
+    """The equilibrium at x (corrected by Newton at the parameters P) with the verdict a single one would get,
+    classified in a regular chart at a gimbal lock; None where it is not one or no verdict is read."""
+    from mechsys.analysis.equilibrium.charts import Unchartable, reclassify, singularities
+
+    for _ in range(30):
+        F = problem.F(x, P)
+        if not np.all(np.isfinite(F)):
+            return None
+        if float(np.max(np.abs(F), initial=0.0)) <= 1e-12 * (1.0 + float(np.max(np.abs(x), initial=0.0))):
+            break
+        x = x - np.linalg.lstsq(problem.J(x, P), F, rcond=None)[0]
+    e = problem.equilibrium(x)
+    assess(problem, e, P)
+    found = singularities(problem.model, e.coordinates, P)
+    try:
+        if found and reclassify(problem, e, found[0], P) is None:
+            return None
+    except (Unchartable, np.linalg.LinAlgError):
+        return None
+    return None if e.stability == "undecided" else e
+
+
+def _changes_at_locks(problem: EquilibriumProblem, branch: Branch, at) -> list[Bifurcation]:
+    """Where the verdict of a branch at a gimbal lock changes between two points with no event between them: the
+    continuation's eigenvalues there are those of the singular chart, which miss what the regular chart's show (a
+    sleeping top in zxz angles turned stable at C w = 2 sqrt(A m g l) with no event reported; in xyz angles the
+    collision is found). Located by bisection on the regular chart's verdicts; a collision when a complex pair
+    leaves the imaginary axis on the unstable side, a Hopf point when the stable side is asymptotically stable,
+    else a zero eigenvalue."""
+    from mechsys.analysis.equilibrium.charts import singularities
+
+    out = []
+    located = [b.p for b in branch.bifurcations]
+    for k, (a, b) in enumerate(zip(branch.points, branch.points[1:])):
+        if "undecided" in (a.verdict, b.verdict) or (a.verdict in STABLE) == (b.verdict in STABLE):
+            continue
+        lo, hi = sorted((a.p, b.p))
+        if any(lo - 1e-12 * (1 + abs(lo)) <= v <= hi + 1e-12 * (1 + abs(hi)) for v in located):
+            continue
+        if not singularities(problem.model, problem.equilibrium(a.x).coordinates, at(a.p)):
+            continue
+        s0, s1, sides = 0.0, 1.0, {a.verdict in STABLE: None, b.verdict in STABLE: None}
+        for _ in range(60):
+            if abs(s1 - s0) * abs(b.p - a.p) <= 1e-11 * (1.0 + abs(a.p)):
+                break
+            mid = 0.5 * (s0 + s1)
+            e = _verdict_at(problem, a.x + mid * (b.x - a.x), at(a.p + mid * (b.p - a.p)))
+            if e is None:
+                break
+            stable = e.stability in STABLE
+            sides[stable] = e
+            s0, s1 = (mid, s1) if stable == (a.verdict in STABLE) else (s0, mid)
+        s = 0.5 * (s0 + s1)
+        unstable, stable = sides.get(False), sides.get(True)
+        growing = [] if unstable is None else [v for v in unstable.eigenvalues if v.real > 0]
+        kind = ("zero_eigenvalue" if not growing or all(abs(v.imag) <= 1e-9 * (1 + abs(v)) for v in growing) else
+                "hopf" if stable is not None and stable.stability == "asymptotically stable" else "collision")
+        out.append(Bifurcation(kind, a.p + s * (b.p - a.p), a.x + s * (b.x - a.x), k))
+    return out
 
 
 def _review(problem: EquilibriumProblem, branches: list[Branch], at, name: str) -> list[Branch]:
