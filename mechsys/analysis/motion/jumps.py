@@ -8,7 +8,7 @@ import numpy as np
 import sympy as sp
 
 from mechsys.errors import AnalysisError
-from mechsys.mechanics.dag import switches
+from mechsys.mechanics.dag import FreeSymbols, switches
 
 if TYPE_CHECKING:
     from mechsys.mechanics.model import MechanicalModel
@@ -33,9 +33,10 @@ def driven(model: MechanicalModel) -> list[Driven]:
     T = model.t
     out: list[Driven] = []
     seen: set = set()
+    symbols = FreeSymbols()  # shared subtrees once: a deep 3-D chain's frame poses are large
 
     def add(what: str, expr: sp.Expr, position: bool) -> None:
-        if expr.has(T) and expr not in seen and switches([expr], T):
+        if symbols.has(expr, T) and expr not in seen and switches([expr], T):
             seen.add(expr)
             out.append(Driven(what, expr, position))
 
