@@ -156,7 +156,7 @@ def system_info(model: MechanicalModel) -> Info:
         prescribed=prescribed, dof_formula=dof_formula, free_coordinates=list(model.coordinates),
         constraint_rank=rank, holonomic_rank=hol_rank, dof=dof, configuration_dof=nfree - hol_rank,
         redundant_constraints=redundant, holonomic=model.is_holonomic, rheonomic=model.is_rheonomic,
-        autonomous=model.is_autonomous(), cyclic=model.cyclic_coordinates(),
+        autonomous=model.is_autonomous() and not model.moving_constraints, cyclic=model.cyclic_coordinates(),
         cyclic_basis=dict(model.cyclic_decision.basis), cyclic_denied=list(model.cyclic_decision.denied),
         massless_coordinates=massless,
         notes=notes)

@@ -459,8 +459,8 @@ class MechanicalModel:
                 and c.position.has(self.t) and not identically_zero(self.diff(c.position, self.t), values)]
 
     def is_autonomous(self, method: str = INTERNAL_METHOD) -> bool:
-        """No explicit t in M, f, A, b and no holonomic constraint that moves with time (moving_constraints).
-        Decided symbolically when t is absent; a step or kink in t (abs, sign, min, max of t) is time dependence;
+        """No explicit t in M, f, A, b (a holonomic constraint that moves with time may leave them autonomous:
+        moving_constraints). Decided symbolically when t is absent; a step or kink in t (abs, sign, min, max of t) is time dependence;
         else by d/dt = 0 at random states to the rounding of its terms (constant prescribed spins leave
         cos(W t)**2 + sin(W t)**2, which is never simplified on this path).
         Remembered per model object and on disk (mechanics/derivations.py)."""
@@ -475,8 +475,6 @@ class MechanicalModel:
         eq = self.equations(method)
         symbols = FreeSymbols()
         parts = [m for m in (eq.M, eq.f, eq.A, eq.b) if m.shape[0] and self.t in symbols.of_all(m)]
-        if self.moving_constraints:
-            return False
         if not parts:
             return True
         from mechsys.mechanics.dag import identically_zero, switches

@@ -109,9 +109,13 @@ def _contains(exprs: list, kinds: tuple) -> bool:
 
 
 def refuse_time_dependence(model: MechanicalModel, method: str, what: str) -> None:
-    """An AnalysisError when the model depends explicitly on time: a holonomic constraint that moves with time (no
-    configuration satisfies x - v*t at rest; it was read at t = 0, and the arm it drives found at rest), or t in the
-    equations of motion (model.is_autonomous)."""
+    """An AnalysisError when the model depends explicitly on time: t in the equations of motion (model.is_autonomous),
+    or, with equations free of t, a holonomic constraint that moves with time (no configuration satisfies
+    psi - W*t at rest; its velocity row psi' - W has no t, it was read at t = 0, and the arm it drives found at
+    rest)."""
+    if not model.is_autonomous(method):
+        raise AnalysisError(f"the equations depend explicitly on time (non-autonomous): there are no {what} in the "
+                            "ordinary sense")
     moving = model.moving_constraints
     if moving:
         one = len(moving) == 1
@@ -120,9 +124,6 @@ def refuse_time_dependence(model: MechanicalModel, method: str, what: str) -> No
             f"time (d/dt at fixed coordinates is not zero): no configuration satisfies {'it' if one else 'them'} at "
             f"rest, so there are no {what} in the ordinary sense; for steady motions relative to a coordinate driven "
             "at a constant rate, make it prescribed (psi: {prescribed: W*t})")
-    if not model.is_autonomous(method):
-        raise AnalysisError(f"the equations depend explicitly on time (non-autonomous): there are no {what} in the "
-                            "ordinary sense")
 
 
 class EquilibriumProblem:
