@@ -677,8 +677,8 @@ def test_a_drive_written_as_a_constraint_that_moves_with_time_has_no_rests(tmp_p
     from scipy.optimize import brentq
 
     held = tmp_path / "held.yaml"
-    held.write_text(_SPIN_ARM.format(psi="{initial: 0, rate: W}",
-                                     constraints="constraints:\n  - {type: holonomic, name: spin, expression: psi - W*t}\n"))
+    spin = "constraints:\n  - {type: holonomic, name: spin, expression: psi - W*t}\n"
+    held.write_text(_SPIN_ARM.format(psi="{initial: 0, rate: W}", constraints=spin))
     result = runner.invoke(app, ["equilibria", str(held)])
     assert result.exit_code == 1
     assert "the constraint 'spin' moves with time" in result.output

@@ -295,7 +295,8 @@ def switches(exprs: Iterable[sp.Basic], x: sp.Symbol) -> list[sp.Expr]:
         elif isinstance(node, (sp.Min, sp.Max)):
             out += [a - b for a, b in combinations(node.args, 2)]
         elif isinstance(node, sp.Piecewise):
-            out += [r.lhs - r.rhs for _, cond in node.args for r in sp.sympify(cond).atoms(sp.core.relational.Relational)]
+            relations = (r for _, cond in node.args for r in sp.sympify(cond).atoms(sp.core.relational.Relational))
+            out += [r.lhs - r.rhs for r in relations]
         stack.extend(node.args)
     return [s for s in out if s.has(x)]
 

@@ -460,9 +460,9 @@ class MechanicalModel:
 
     def is_autonomous(self, method: str = INTERNAL_METHOD) -> bool:
         """No explicit t in M, f, A, b (a holonomic constraint that moves with time may leave them autonomous:
-        moving_constraints). Decided symbolically when t is absent; a step or kink in t (abs, sign, min, max of t) is time dependence;
-        else by d/dt = 0 at random states to the rounding of its terms (constant prescribed spins leave
-        cos(W t)**2 + sin(W t)**2, which is never simplified on this path).
+        moving_constraints). Decided symbolically when t is absent; a step or kink in t (abs, sign, min, max of t)
+        is time dependence; else by d/dt = 0 at random states to the rounding of its terms (constant prescribed
+        spins leave cos(W t)**2 + sin(W t)**2, which is never simplified on this path).
         Remembered per model object and on disk (mechanics/derivations.py)."""
         memo = self.__dict__.setdefault("_autonomous", {})
         if method not in memo:

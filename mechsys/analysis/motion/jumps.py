@@ -1,4 +1,4 @@
-"""Where the model's time-dependent kinematics move by a jump in position or velocity: an impulse simulate does not apply."""
+"""Where time-dependent kinematics jump in position or velocity: an impulse that simulate does not apply."""
 from __future__ import annotations
 
 from dataclasses import dataclass
