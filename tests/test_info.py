@@ -229,30 +229,22 @@ MODELS = sorted([*(ROOT / "systems").glob("*.yaml"), *(ROOT / "tests" / "data" /
 
 
 @pytest.mark.parametrize("path", MODELS, ids=[p.stem for p in MODELS])
-def test_the_uncompiled_first_test_decides_as_the_compiled_one_alone(path, monkeypatch):
+def test_the_quick_cyclic_tests_decide_as_the_compiled_ones(path, monkeypatch):
     """The cyclic coordinates (and their basis) of every bundled model and the user-written ones (tops, Furuta,
-    torque-free bodies) are the same with the uncompiled first test as with the compiled test alone."""
+    torque-free bodies) are the same with the uncompiled first test as with the compiled test alone, and the same
+    with the shift test's one walk over all its states (dag.Points: M, f, A, b and Phi) as with its compiled
+    functions. (One test: the default decision, with both quick paths, is computed once.)"""
     from mechsys.mechanics import symmetry
 
     monkeypatch.setenv("MECHSYS_CACHE", "off")
-    with_first = mechsys.load(path).cyclic_decision
-    monkeypatch.setattr(symmetry._Entries, "dependent", lambda self, q: False)
-    alone = mechsys.load(path).cyclic_decision
-    assert (with_first.names, with_first.basis, with_first.denied) == (alone.names, alone.basis, alone.denied)
-
-
-@pytest.mark.parametrize("path", MODELS, ids=[p.stem for p in MODELS])
-def test_the_walked_shift_test_decides_as_the_compiled_one(path, monkeypatch):
-    """The shift test evaluates M, f, A, b and Phi by one walk over all its states (dag.Points) instead of
-    compiling them: the same cyclic coordinates and bases as with the compiled functions, on every bundled model
-    and the user-written ones."""
-    from mechsys.mechanics import symmetry
-
-    monkeypatch.setenv("MECHSYS_CACHE", "off")
-    walked = mechsys.load(path).cyclic_decision
+    quick = mechsys.load(path).cyclic_decision
+    with monkeypatch.context() as patch:
+        patch.setattr(symmetry._Entries, "dependent", lambda self, q: False)
+        alone = mechsys.load(path).cyclic_decision
+    assert (quick.names, quick.basis, quick.denied) == (alone.names, alone.basis, alone.denied)
     monkeypatch.setattr(symmetry._Shifts, "_walked", lambda self, k, walk, count: None)
     compiled = mechsys.load(path).cyclic_decision
-    assert (walked.names, walked.basis, walked.denied) == (compiled.names, compiled.basis, compiled.denied)
+    assert (quick.names, quick.basis, quick.denied) == (compiled.names, compiled.basis, compiled.denied)
 
 
 def test_points_evaluates_as_compiled_code_at_every_point():
