@@ -9,7 +9,6 @@ from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
 
-from mechsys.analysis.motion.jumps import refuse_jumps
 from mechsys.errors import AnalysisError, InputError
 from mechsys.numeric import saddle
 from mechsys.numeric.native import BUDGET_SPENT, budget_spent
@@ -1181,6 +1180,8 @@ def integrate(model: MechanicalModel, options: SimulationOptions, overrides_p: n
             time.perf_counter() - t0
         p = parameter_values(model) if overrides_p is None else overrides_p
         q0, u0, warnings = _start(model, c, p)
+        from mechsys.analysis.motion.jumps import refuse_jumps  # sympy: not on the warm path's imports
+
         refuse_jumps(model, p, q0, t_end)
         unwatched = [entry["name"] for entry in model.kin.contacts if entry["gap"] is None]
         if unwatched:
