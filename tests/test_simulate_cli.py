@@ -3,6 +3,7 @@ import json
 from pathlib import Path
 
 import numpy as np
+import pytest
 from typer.testing import CliRunner
 
 from mechsys.cli import app
@@ -131,3 +132,29 @@ def test_a_t_end_that_is_not_a_whole_number_of_dt_still_ends_at_t_end(tmp_path):
         assert abs(rows[-1, 1] - 0.1 * np.cos(3.0)) < 1e-8
         summary = json.loads(r.stdout)["simulation summary"]
         assert abs(summary["x(t_end)"] - 0.1 * np.cos(3.0)) < 1e-6
+
+
+def test_bench_errors_are_relative_to_each_components_size_at_any_amplitude(tmp_path):
+    """An oscillator (m = 1, k = 4) started at x = 1e-5: bench's final error is the largest of |x - x_ref| / A and
+    |v - v_ref| / (A w), A w the sizes along the run (closed form x = A cos(w t)). It was measured against
+    max(1, |final state|), so a state of 1e-5 showed errors 1e5 times too small (helper audit: a spring chain's RK45
+    at rtol 1e-4 showed 3.6e-7 where it was off by 0.4 %)."""
+    import math
+
+    import mechsys
+    from mechsys.analysis.motion.simulate import simulate
+    from mechsys.analysis.motion.workprecision import work_precision
+
+    A, w, t_end = 1e-5, 2.0, 3.0
+    path = tmp_path / "osc.yaml"
+    path.write_text(f"name: osc\ncoordinates:\n  x: {{initial: {A}}}\nlinks:\n  block:\n"
+                    "    joint: {type: prismatic, parent: ground, axis: x, coordinate: x}\n    mass: 1\n"
+                    "forces:\n  - {type: torsional_spring, coordinate: x, stiffness: 4}\n")
+    model = mechsys.load(path)
+    points, _ = work_precision(model, t_end, ["RK45"], [1e-4, 1e-6])
+    for point in points:
+        r = simulate(model, t_end, method="RK45", rtol=point.rtol, atol=point.rtol * 1e-3)
+        x_err = abs(r.q[-1, 0] - A * math.cos(w * t_end)) / A
+        v_err = abs(r.u[-1, 0] + A * w * math.sin(w * t_end)) / (A * w)
+        assert point.final_error == pytest.approx(max(x_err, v_err), rel=1e-4)  # sizes read at the output rows
+        assert point.final_error > 1e-8  # a real relative error, not one scaled down by the amplitude

@@ -64,6 +64,7 @@ def work_precision(model: MechanicalModel, t_end: float, methods: list[str], rto
         reference = Reference(method, rtol, time.perf_counter() - t0, "; ".join(failed))
         break
     y_ref = np.concatenate([ref.q[-1], ref.u[-1]])
+    sizes = _sizes(ref.q, ref.u)
     points = []
     for method in methods:
         for rtol in rtols:
@@ -75,7 +76,7 @@ def work_precision(model: MechanicalModel, t_end: float, methods: list[str], rto
                 continue
             seconds = time.perf_counter() - t0
             y = np.concatenate([r.q[-1], r.u[-1]])
-            err = float(np.max(np.abs(y - y_ref)) / max(1.0, float(np.max(np.abs(y_ref)))))
+            err = float(np.max(np.abs(y - y_ref) / sizes))
             points.append(WorkPoint(method, rtol, seconds, r.rhs_evaluations, err, r.energy_balance_error,
                                     float(np.max(r.residual))))
     return points, reference
@@ -100,3 +101,16 @@ def plot_work_precision(points: list[WorkPoint], path: str) -> None:
     fig.tight_layout()
     fig.savefig(path)
     plt.close(fig)
+
+
+def _sizes(q: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """The size each final coordinate and rate is measured against: its largest |value| along the reference run; one
+    that stays 0 takes the largest of its kind (coordinates or rates), and 1 if those do too. The error was measured
+    against max(1, |final state|), absolute for a small state: a spring chain moving 1e-5 m showed 3.6e-7 where
+    RK45 at rtol 1e-4 was off by 0.4 %."""
+    out = []
+    for block in (np.abs(q), np.abs(u)):
+        size = np.max(block, axis=0) if block.size else np.zeros(block.shape[1])
+        kind = float(np.max(size)) if size.size else 0.0
+        out.append(np.where(size > 0, size, kind if kind > 0 else 1.0))
+    return np.concatenate(out)
