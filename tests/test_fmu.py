@@ -12,6 +12,7 @@ from __future__ import annotations
 import ctypes
 import shutil
 import subprocess
+import tempfile
 import zipfile
 from pathlib import Path
 
@@ -84,7 +85,9 @@ class Stepper:
         self.vr = {v.name: v.valueReference for v in self.md.modelVariables}
         self.nx = len(self.md.derivatives)
         self.events = 0
-        self.fmu = FMU2Model(guid=self.md.guid, unzipDirectory=extract(str(path)),
+        # extracted beside the FMU, in pytest's temporary folders (fmpy's own temporary folder was never removed)
+        unzipped = extract(str(path), unzipdir=tempfile.mkdtemp(prefix="unzipped-", dir=path.parent))
+        self.fmu = FMU2Model(guid=self.md.guid, unzipDirectory=unzipped,
                              modelIdentifier=self.md.modelExchange.modelIdentifier, instanceName="test")
         self._callbacks = fmi2CallbackFunctions()
         self._callbacks.logger = fmi2CallbackLoggerTYPE(self._log)
