@@ -438,18 +438,28 @@ def _verdicts(problem: EquilibriumProblem, branch: Branch, at) -> tuple[list[str
     return verdicts, bad
 
 
+def _newton_at(problem: EquilibriumProblem, z: np.ndarray, P: np.ndarray, rows=slice(None)) -> np.ndarray:
+    """z corrected by Newton (least squares) on the rest equations ``rows`` at the fixed parameters P, until the
+    step is at round-off (20 steps at most)."""
+    for _ in range(20):
+        dz = np.linalg.lstsq(problem.J(z, P)[rows], -problem.F(z, P)[rows], rcond=None)[0]
+        z = z + dz
+        if np.linalg.norm(dz, np.inf) <= 1e-14 * (1.0 + np.linalg.norm(z, np.inf)):
+            break
+    return z
+
+
 def _verdict_at(problem: EquilibriumProblem, x: np.ndarray, P: np.ndarray) -> Equilibrium | None:
     """The equilibrium at x (corrected by Newton at the parameters P) with the verdict a single one would get,
     classified in a regular chart at a gimbal lock; None where it is not one or no verdict is read."""
     from mechsys.analysis.equilibrium.charts import Unchartable, reclassify, singularities
 
-    for _ in range(30):
-        F = problem.F(x, P)
-        if not np.all(np.isfinite(F)):
-            return None
-        if float(np.max(np.abs(F), initial=0.0)) <= 1e-12 * (1.0 + float(np.max(np.abs(x), initial=0.0))):
-            break
-        x = x - np.linalg.lstsq(problem.J(x, P), F, rcond=None)[0]
+    try:
+        x = _newton_at(problem, x, P)
+    except (np.linalg.LinAlgError, ValueError):  # not finite along the way
+        return None
+    if not np.all(np.isfinite(x)):
+        return None
     e = problem.equilibrium(x)
     assess(problem, e, P)
     found = singularities(problem.model, e.coordinates, P)
@@ -604,14 +614,7 @@ def _refine_singular(problem, par: SweptParameter, rows, p0: float, x0: np.ndarr
     from scipy.optimize import brentq
 
     def corrected(p: float) -> np.ndarray:
-        z = x0.copy()
-        P = par.at(p)
-        for _ in range(20):
-            F = problem.F(z, P)[rows]
-            dz = np.linalg.lstsq(problem.J(z, P)[rows], -F, rcond=None)[0]
-            z = z + dz
-            if np.linalg.norm(dz, np.inf) <= 1e-14 * (1.0 + np.linalg.norm(z, np.inf)):
-                break
+        z = _newton_at(problem, x0.copy(), par.at(p), rows)
         if np.linalg.norm(z - x0) > 1e-3 * (1.0 + np.linalg.norm(x0)):
             raise ValueError("left the branch")
         return z
