@@ -8,6 +8,7 @@ import json
 import os
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -405,6 +406,38 @@ def test_a_unit_that_does_not_compile_fails_the_build_and_leaves_no_files(tmp_pa
     with pytest.raises(AnalysisError, match="compiling the native integrator failed"):
         native.build(["int f(void) { return 1; }\n", "int g(void) { return x; }\n"], folder / "lib.so")
     assert not list(folder.iterdir())
+
+
+def test_a_cancelled_build_stops_the_compilers_processes_and_leaves_no_temporary_files(tmp_path, monkeypatch):
+    """cancel() stops the C compiler while it compiles: its own processes (cc1, as) too, and the temporary files
+    they write (cc*.s, formerly in the system's temporary folder, left there by each suite run) go with the build."""
+    system_tmp = tmp_path / "system-tmp"
+    system_tmp.mkdir()
+    monkeypatch.setenv("TMPDIR", str(system_tmp))
+    lines = "\n".join(f"  s += sin(a[{k % 7}] * {k + 1}.0) * cos(s + {k}.5);" for k in range(20_000))
+    source = f"#include <math.h>\ndouble f(const double *a) {{\n  double s = 0.0;\n{lines}\n  return s;\n}}\n"
+    folder = tmp_path / "build"
+    folder.mkdir()
+    pending = native.PendingBuild(source, folder / "lib.so", "-O2")
+    deadline = time.monotonic() + 30.0
+    while not list(Path(pending._tmp.name).glob("cc*")) and not list(system_tmp.glob("cc*")):
+        assert time.monotonic() < deadline, "the compiler wrote no temporary file"
+        time.sleep(0.01)
+    group = pending._procs[0].pid
+    pending.cancel()
+    time.sleep(0.2)
+    assert not list(system_tmp.iterdir()) and not list(folder.iterdir())
+    alive = [p for p in Path("/proc").glob("[0-9]*") if _in_group(p, group)]
+    assert not alive
+
+
+def _in_group(proc: Path, group: int) -> bool:
+    """Whether the process /proc/<pid> lives (not a zombie) in the process group ``group``."""
+    try:
+        fields = (proc / "stat").read_text().rsplit(")", 1)[1].split()
+    except OSError:
+        return False
+    return fields[0] != "Z" and int(fields[2]) == group
 
 
 def _program_sources(path, monkeypatch, tmp_path) -> tuple[str, dict[str, int], int]:

@@ -13,6 +13,7 @@ import math
 import os
 import platform
 import shutil
+import signal
 import subprocess
 import sys
 import tempfile
@@ -353,16 +354,22 @@ class PendingBuild:
                 out = c_file.with_suffix(".o")
                 what = ["-c", "-o", str(out), str(c_file)]
                 self._objects.append(out)
-            self._procs.append(subprocess.Popen([cc, opt, "-std=gnu99", "-fPIC", *what], stdout=subprocess.DEVNULL,
-                                                stderr=subprocess.PIPE, text=True))
+            self._procs.append(self._start([cc, opt, "-std=gnu99", "-fPIC", *what]))
+
+    def _start(self, command: list[str]) -> subprocess.Popen:
+        # A session of its own, so that cancel() stops the compiler's own processes too (cc1, as: killing the
+        # driver alone leaves them running), and TMPDIR in the folder cleaned up (their files go with it).
+        env = {**os.environ, "TMPDIR": self._tmp.name}
+        return subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, env=env,
+                                start_new_session=_POSIX)
 
     def finish(self) -> Path:
         try:
             for proc in self._procs:
                 _check(proc, *proc.communicate())
             if self._objects:
-                link = subprocess.Popen([self._cc, "-shared", "-o", str(self._so), *map(str, self._objects), "-lm"],
-                                        stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+                link = self._start([self._cc, "-shared", "-o", str(self._so), *map(str, self._objects), "-lm"])
+                self._procs.append(link)
                 _check(link, *link.communicate())
             os.replace(self._so, self.target)
         finally:
@@ -373,10 +380,18 @@ class PendingBuild:
         """Stop the compilers (each exits without its result) and remove the temporary files."""
         for proc in self._procs:
             if proc.poll() is None:
+                if _POSIX:
+                    try:
+                        os.killpg(proc.pid, signal.SIGKILL)
+                    except ProcessLookupError:
+                        pass
                 proc.kill()
             proc.wait()
             proc.stderr.close()
         self._tmp.cleanup()
+
+
+_POSIX = os.name == "posix"
 
 
 def _check(proc: subprocess.Popen, _out, err: str) -> None:
