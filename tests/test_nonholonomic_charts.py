@@ -105,6 +105,13 @@ def test_steady_motions_where_the_speeds_move_no_mass_are_undecided_not_classifi
         assert all(math.hypot(*v) < 10 for v in e["eigenvalues"]), e
     bottom = [e for e in rows if abs(e["coordinates"]["p1"]) < 1e-6 and abs(e["coordinates"]["p2"]) < 1e-6]
     assert len(bottom) == 1
+    # the ball rests in every orientation (a1, a2): one continuum per position of the arm (p1, p2), one row each
+    # (the tangent test read a ball's zero columns of rounding as directions: 14 rows, 'each of 14 continua')
+    arms = [tuple(round(e["coordinates"][c] / (math.pi / 2)) % 4 for c in ("p1", "p2")) for e in rows]
+    assert len(set(arms)) == len(arms) == 7
+    assert json.loads(result.output)["message"].startswith(
+        "the equilibria are not isolated (singular Jacobian: e.g. a free rigid-body motion); "
+        "one representative of each of 7 continua is shown")
     w = math.sqrt(5 * 9.81 / (7 * (0.6 - 0.05)))
     oscillating = sorted(abs(v[1]) for v in bottom[0]["eigenvalues"] if abs(v[1]) > 1e-6)
     assert oscillating == pytest.approx([w] * 4, rel=1e-9)

@@ -1130,15 +1130,20 @@ def _motions(problem: EquilibriumProblem, z: np.ndarray, p: np.ndarray) -> np.nd
     rows, sizes = small_scales(problem, p)
     J = J / rows[:, None] * sizes
     columns = np.linalg.norm(J, axis=0)
+    # a column of rounding (a ball's orientation at rest: 1e-16 beside 1) is a zero column: scaled to unit length it
+    # was a direction like any other, and the null vectors came out 1e16 times its size
+    J[:, columns <= 1e-12 * max(float(np.max(columns, initial=0.0)), 1e-300)] = 0.0
+    columns = np.linalg.norm(J, axis=0)
     columns[columns == 0] = 1.0  # a zero column: its unit vector is a null vector either way
     _, sv, Vt = np.linalg.svd(_equilibrated(J))
     sv = np.concatenate([sv, np.zeros(J.shape[1] - sv.size)])
     null = Vt[sv <= 1e-9 * max(1.0, sv[0])] / columns * sizes  # null vectors of J itself (the scalings undone)
+    null /= np.linalg.norm(null, axis=1, keepdims=True)  # each to unit size: a direction counts by its own size
     moves = null[:, : problem.nq + len(problem.rate_unknowns)]
     if not moves.size:
         return moves
     _, S, Wt = np.linalg.svd(moves, full_matrices=False)
-    return Wt[S > 1e-6 * max(float(np.max(np.linalg.norm(null, axis=1))), 1e-300)]
+    return Wt[S > 1e-6]
 
 
 def continua(problem: EquilibriumProblem, roots: list[np.ndarray], p: np.ndarray) -> list[np.ndarray]:
