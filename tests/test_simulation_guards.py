@@ -267,6 +267,43 @@ def test_a_velocity_that_jumps_at_the_start_is_refused_with_both_values(tmp_path
     with pytest.raises(AnalysisError, match=r"velocity by a jump at the start \(t = 0: 1 as written, 2 just after\)"):
         simulate(mechsys.load(path, release_prescribed=True), t_end=1.0)
 
+def test_a_triangle_wave_written_without_a_switching_function_is_refused_at_its_first_corner(tmp_path):
+    """A cart driven as the triangle wave x = A*asin(sin(w t)) (no abs, sign, min or max to find): at t = pi/(2w)
+    its velocity reverses from A w = 0.6 to -0.6 m/s, an impulse that throws the pendulum to phi' = -1.2/l. The run
+    kept phi = 1e-8 through every corner, exit 0 at rtol 1e-6 (at rtol 1e-10 it stopped on a step too small,
+    naming nothing). The grid scan finds the corner; the run before it is fine (a cart at constant speed)."""
+    path = tmp_path / "triangle.yaml"
+    path.write_text(_PENDULUM_UNDER.format(
+        name="cart", coords="  x: {prescribed: \"0.2*asin(sin(3*t))\"}\n  phi: {initial: 0}\n", parent="cart",
+        origin="", links="  cart:\n    joint: {type: prismatic, parent: ground, axis: x, coordinate: x}\n", extra=""))
+    corner = math.pi / 6
+    for rtol in (1e-6, 1e-10):
+        # (one-sided values read 1e-6 s from the corner: closer, the velocity's 1 - sin^2 is rounding)
+        with pytest.raises(AnalysisError, match=r"the prescribed motion of x \(asin\(sin\(3\*t\)\)/5\) changes its "
+                                                r"velocity by a jump near t = 0.523599 s \(from 0.6000\d* to "
+                                                r"-0.59999\d*\)"):
+            simulate(mechsys.load(path, release_prescribed=True), t_end=1.0, rtol=rtol, atol=rtol)
+    r = simulate(mechsys.load(path, release_prescribed=True), t_end=0.95 * corner)
+    assert np.max(np.abs(r.q[:, r.coordinates.index("phi")])) < 1e-9
+
+
+def test_fast_smooth_or_steep_prescribed_motions_are_not_taken_for_jumps(tmp_path):
+    """The grid scan looks closer where a function changes ten times more than beside: a fast smooth oscillation
+    (over 100 s, aliased on the grid) and the docs' smoothed reversal sqrt((t - a)**2 + e**2), whose velocity turns
+    over 1e-5 s (a jump on the grid, not closer), are no jumps."""
+    from mechsys.analysis.motion.jumps import refuse_jumps
+    from mechsys.numeric.parameters import parameter_values
+
+    for motion, t_end in (("0.01*sqrt(1 + 0.5*sin(500*t))", 100.0), ("sqrt((t - 0.30011)**2 + 1e-10)", 1.0)):
+        path = tmp_path / "smooth.yaml"
+        path.write_text(_PENDULUM_UNDER.format(
+            name="cart", coords=f"  x: {{prescribed: \"{motion}\"}}\n  phi: {{initial: 0}}\n", parent="cart",
+            origin="", links="  cart:\n    joint: {type: prismatic, parent: ground, axis: x, coordinate: x}\n",
+            extra=""))
+        model = mechsys.load(path, release_prescribed=True)
+        refuse_jumps(model, parameter_values(model), np.zeros(len(model.q)), t_end)
+
+
 def test_a_torque_on_a_massless_hub_that_the_constraints_let_turn_is_refused(tmp_path):
     """A massless hub with a 1 N m torque carries a wheel (I = 1) whose absolute angle a + b is locked: the hub may
     turn (the wheel counter-rotating relative to it), nothing has inertia along that motion, and a force drives it.

@@ -13,7 +13,8 @@ from mechsys.mechanics.dag import FreeSymbols, switches
 if TYPE_CHECKING:
     from mechsys.mechanics.model import MechanicalModel
 
-#: Points of the grid on which the switching functions' sign changes are sought (then refined by bisection).
+#: Points of the grid on which the switching functions' sign changes and other jumps are sought (then refined by
+#: bisection).
 GRID = 4001
 
 
@@ -28,15 +29,15 @@ class Driven:
 
 
 def driven(model: MechanicalModel) -> list[Driven]:
-    """The time-dependent kinematics written with abs, sign, min, max (...) of t: prescribed motions, frame poses
-    (a joint `origin` or transform step with t), holonomic constraints, and velocity constraints at rest."""
+    """The time-dependent kinematics: prescribed motions, frame poses (a joint `origin` or transform step with t),
+    holonomic constraints, and velocity constraints at rest."""
     T = model.t
     out: list[Driven] = []
     seen: set = set()
     symbols = FreeSymbols()  # shared subtrees once: a deep 3-D chain's frame poses are large
 
     def add(what: str, expr: sp.Expr, position: bool) -> None:
-        if symbols.has(expr, T) and expr not in seen and switches([expr], T):
+        if symbols.has(expr, T) and expr not in seen:
             seen.add(expr)
             out.append(Driven(what, expr, position))
 
@@ -83,19 +84,73 @@ def _roots(g: Callable, t_end: float) -> list[float]:
     return roots
 
 
+def _suspects(f: Callable, t_end: float) -> list[float]:
+    """Where f may jump on [0, t_end], whatever function makes it (asin(sin(w t)), a triangle wave, has no switching
+    function): the grid intervals across which f changes ten times more than across either neighbour (beyond
+    rounding), each narrowed by bisection to the half that changes more, and the grid points where f is not
+    finite. In time order; _jump decides."""
+    grid = np.linspace(0.0, t_end, GRID)
+    values = _values(f, grid)
+    finite = np.isfinite(values)
+    if not np.any(finite):
+        return []
+    change = np.abs(np.diff(values))
+    change[~(finite[:-1] & finite[1:])] = 0.0
+    beside = np.maximum(np.concatenate([[0.0], change[:-1]]), np.concatenate([change[1:], [0.0]]))
+    floor = 1e-9 * (1.0 + float(np.max(np.abs(values[finite]))))
+    found = [float(t) for t in grid[~finite]]
+    for k in np.flatnonzero((change > floor) & (change > 10.0 * beside))[:_SUSPECTS]:
+        a, b, fa, fb = float(grid[k]), float(grid[k + 1]), float(values[k]), float(values[k + 1])
+        for _ in range(64):
+            mid = 0.5 * (a + b)
+            fm = float(_values(f, np.array([mid]))[0])
+            if mid in (a, b) or not np.isfinite(fm):
+                a = b = mid
+                break
+            if abs(fm - fa) >= abs(fb - fm):
+                b, fb = mid, fm
+            else:
+                a, fa = mid, fm
+        found.append(0.0 if a == 0.0 else 0.5 * (a + b))
+    return sorted(found)
+
+
+def _smooth(expr: sp.Expr) -> bool:
+    """Whether expr is built only of functions smooth everywhere (sums, products, whole powers, sin, cos, exp, ...):
+    nothing to scan (W*t, a sinusoid)."""
+    return all(isinstance(node, _SMOOTH) or node.is_Atom or node.is_Pow and node.exp.is_Integer and node.exp >= 0
+               for node in sp.preorder_traversal(expr))
+
+
+_SMOOTH = (sp.Add, sp.Mul, sp.sin, sp.cos, sp.exp, sp.sinh, sp.cosh, sp.tanh, sp.atan)
+
+#: Intervals of one function that _suspects narrows at most (a fast smooth oscillation aliased on the grid).
+_SUSPECTS = 200
+
+
+def _values(f: Callable, t: np.ndarray) -> np.ndarray:
+    with np.errstate(all="ignore"):
+        return np.array(np.broadcast_to(np.asarray(f(t), dtype=float), t.shape))
+
+
 def _jump(f: Callable, tc: float) -> tuple[float, float, float]:
     """(jump, value before, value after) of f at tc, jump 0 when there is none: the difference of its one-sided
     values that does not shrink as they close in (a steep but continuous function's shrinks 1000 times over 1000
-    times closer). At t = 0 the run starts from f(0) itself, so another value just after it is a jump too."""
+    times closer; 100 times closer where the closest values are not finite: the velocity of asin(sin(w t)) divides
+    by its rounding there). At t = 0 the run starts from f(0) itself, so another value just after it is a jump too."""
     def gap(h: float) -> tuple[float, float, float]:
         before = tc - h if tc - h > 0 else 0.0
+        a, b = _values(f, np.array([before, tc + h]))
         with np.errstate(all="ignore"):
-            pair = np.broadcast_to(np.asarray(f(np.array([before, tc + h])), dtype=float), (2,))
-        return float(abs(pair[1] - pair[0])), float(pair[0]), float(pair[1])
+            return float(abs(b - a)), float(a), float(b)
 
     h = 1e-6 * max(1.0, abs(tc))
-    far, _, _ = gap(h)
-    near, a, b = gap(h * 1e-3)
+    far, a, b = gap(h)
+    near, a_near, b_near = gap(h * 1e-3)
+    if np.isfinite(near):
+        a, b = a_near, b_near
+    else:  # (the values reported are then those at h: closer, the rounding shows in them)
+        near, _, _ = gap(h * 1e-2)
     if not (np.isfinite(far) and np.isfinite(near)) or near <= 0.5 * far or near <= 1e-9 * (1.0 + abs(a) + abs(b)):
         return 0.0, a, b
     return near, a, b
@@ -103,9 +158,11 @@ def _jump(f: Callable, tc: float) -> tuple[float, float, float]:
 
 def refuse_jumps(model: MechanicalModel, p: np.ndarray, q0: np.ndarray, t_end: float) -> None:
     """An AnalysisError at the first time in [0, t_end] where a driven position or velocity jumps (abs, sign, min,
-    max of t in a prescribed motion, a joint origin or a constraint): an impulse on what it carries, which the
-    integration does not apply (a pendulum on a cart prescribed as abs(t - 0.5) stayed at rest where the reversal
-    throws it to -3.6 rad/s). A velocity that only kinks (a ramp blended into a constant rate) is fine."""
+    max of t in a prescribed motion, a joint origin or a constraint, or any other non-smooth function: a triangle
+    wave asin(sin(w t))): an impulse on what it carries, which the integration does not apply (a pendulum on a cart
+    prescribed as abs(t - 0.5) stayed at rest where the reversal throws it to -3.6 rad/s). A velocity that only
+    kinks (a ramp blended into a constant rate) is fine. Sought where the switching functions change sign and where
+    a grid of GRID points shows a jump (_suspects)."""
     pieces = driven(model)
     if not pieces:
         return
@@ -114,16 +171,20 @@ def refuse_jumps(model: MechanicalModel, p: np.ndarray, q0: np.ndarray, t_end: f
     values.update({q: sp.Float(float(x)) for q, x in zip(model.q, q0)})
     first: tuple | None = None
     for d in pieces:
+        if _smooth(d.written):
+            continue  # (W*t, a sinusoid: smooth, and so is its velocity)
         written = d.written.xreplace(values)
         levels = [("position", written), ("velocity", sp.diff(written, T))] if d.position else [("velocity", written)]
         for level, expr in levels:
             expr = expr.replace(sp.DiracDelta, lambda *args: sp.Integer(0))  # the jump itself is what is sought
             f = sp.lambdify(T, expr, "numpy")
-            for s in switches([expr], T):
-                for tc in _roots(sp.lambdify(T, s, "numpy"), t_end):
-                    size, before, after = _jump(f, tc)
-                    if size and (first is None or tc < first[0]):
-                        first = (tc, d, level, before, after)
+            known = [tc for s in switches([expr], T) for tc in _roots(sp.lambdify(T, s, "numpy"), t_end)]
+            for tc in sorted(known + _suspects(f, t_end)):
+                if first is not None and tc >= first[0]:
+                    break
+                size, before, after = _jump(f, tc)
+                if size:
+                    first = (tc, d, level, before, after)
     if first is None:
         return
     tc, d, level, before, after = first
