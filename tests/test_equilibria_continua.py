@@ -57,3 +57,67 @@ def test_roots_one_rounding_apart_are_ordered_by_their_next_coordinate():
     b = Equilibrium({"y1": 0.3038, "y2": -0.2943}, {}, [])
     assert sorted([a, b], key=_order) == [b, a]
     assert sorted([Equilibrium({"y1": -1.0, "y2": 5.0}, {}, []), b], key=_order)[0].coordinates["y1"] == -1.0
+
+
+_ONE_MASS = """name: one_mass
+coordinates:
+  x: {{initial: 0.5, rate: 0}}
+links:
+  mass:
+    particle: true
+    joint: {{type: prismatic, parent: ground, axis: x, coordinate: x}}
+    mass: 1
+forces:
+{forces}
+"""
+
+
+def _rests(tmp_path, forces: str, *options: str) -> dict:
+    path = tmp_path / "one.yaml"
+    path.write_text(_ONE_MASS.format(forces=forces))
+    result = CliRunner().invoke(app, ["equilibria", str(path), "-f", "json", *options])
+    assert result.exit_code == 0, result.output
+    return json.loads(result.output)
+
+
+@pytest.mark.parametrize("exhaustive", [False, True])
+def test_an_isolated_double_root_is_no_continuum(tmp_path, exhaustive):
+    """V = (x - 1)**3/3 + (x - 1)**4/4, V' = x (x - 1)**2: two isolated rests, x = 0 (V'' = 1, stable) and the double
+    root x = 1 (V'' = 0, V''' = 2: an inflection, no minimum). Its Jacobian is singular, and the listing said 'the
+    equilibria are not isolated ... one representative of the continuum is shown' (with --exhaustive too, beside
+    its own count of isolated roots): no root goes on from x = 1."""
+    data = _rests(tmp_path, "  - {type: potential, value: (x-1)**3/3 + (x-1)**4/4}", *(["--exhaustive"] * exhaustive))
+    assert "not isolated" not in data["message"]
+    rows = [(e["coordinates"]["x"], e["stability"]) for e in data["equilibria"]]
+    assert [round(x, 6) for x, _ in rows] == [0.0, 1.0]
+    assert rows[0][1] == "stable" and rows[1][1] == "undecided"
+
+
+@pytest.mark.parametrize("forces", [
+    "  - {type: potential, value: (x**2-9/4)**2/4}\n"
+    "  - {type: generalized_force, coordinate: x, value: x*(x**2-9/4)*(1 - (x**2-4)**2)}",
+    "  - {type: potential, value: x**2*(3*x**6 - 41*x**4 + 204*x**2 - 432)/24}"], ids=["force", "potential"])
+def test_a_double_root_where_the_force_keeps_its_sign_is_not_called_stable(tmp_path, forces):
+    """F = -x (x**2 - b**2) (x**2 - 4)**2 with b = 1.5, written as a potential plus a generalized force, or as the
+    potential V = x**2 (3 x**6 - 41 x**4 + 204 x**2 - 432)/24 whose V' is -F (integrated by hand, checked below).
+    Rests: x = 0 (unstable), +-1.5 (stable) and the double roots +-2, where F has one sign on both sides (at x = 2
+    it pushes towards -x from either side: Lyapunov unstable). Newton finds x = 2 only to ~1e-9, on whichever side
+    it lands, and the stiffness there (1.7e-7) made x = +-2 'stable (strict minimum ... Lagrange-Dirichlet)', or
+    'stable' by the purely oscillatory spectrum (+-1.6e-6 i). A degenerate root is now recognised: never 'stable'
+    at +-2, with or without --exhaustive."""
+    for exhaustive in (False, True):
+        data = _rests(tmp_path, forces, *(["--exhaustive"] * exhaustive))
+        rows = {round(e["coordinates"]["x"], 6): e["stability"] for e in data["equilibria"]}
+        assert sorted(rows) == [-2.0, -1.5, 0.0, 1.5, 2.0]
+        assert rows[0.0] == "unstable" and rows[1.5] == rows[-1.5] == "stable"
+        assert rows[2.0] in ("undecided", "unstable") and rows[-2.0] in ("undecided", "unstable"), rows
+
+    def force(x: float) -> float:
+        return -x * (x * x - 2.25) * (x * x - 4) ** 2
+
+    def potential(x: float) -> float:
+        return x ** 2 * (3 * x ** 6 - 41 * x ** 4 + 204 * x ** 2 - 432) / 24
+
+    assert all(force(x) < 0 for x in (2 - 1e-3, 2 + 1e-3)) and all(force(x) > 0 for x in (-2 - 1e-3, -2 + 1e-3))
+    for x in (0.3, 1.7, 2.4):  # V' = -F (central difference)
+        assert (potential(x + 1e-6) - potential(x - 1e-6)) / 2e-6 == pytest.approx(-force(x), rel=1e-7)

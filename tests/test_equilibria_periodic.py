@@ -62,3 +62,18 @@ def test_its_sweep_follows_the_root(tmp_path):
     assert {r["branch"] for r in rows} == {"1"} and float(rows[-1]["tau"]) == 8.0
     for r in rows:
         assert float(r["th"]) == pytest.approx(_rest(float(r["tau"])), abs=1e-8)
+
+
+def test_problem_57_marked_angular_keeps_its_three_rests(tmp_path):
+    """docs/equilibria.md §2.4: problem 57 with `angle: true` in a copy of the file. Its rest equation
+    pi^2 q - q^3 = 0 is not 2 pi-periodic, so q stays a plain coordinate: q = -pi, 0, pi remain three rests (the
+    docs said two, with -pi and pi one point)."""
+    from pathlib import Path
+
+    text = (Path(__file__).resolve().parents[1] / "systems" / "problem57.yaml").read_text()
+    path = tmp_path / "p57.yaml"
+    path.write_text(text.replace("q: {initial: 0.1, rate: 0}", "q: {initial: 0.1, rate: 0, angle: true}"))
+    result = runner.invoke(app, ["equilibria", str(path), "-f", "json"])
+    assert result.exit_code == 0, result.output
+    rests = sorted(round(e["coordinates"]["q"], 9) for e in json.loads(result.output)["equilibria"])
+    assert rests == [round(-math.pi, 9), 0.0, round(math.pi, 9)]

@@ -1114,7 +1114,66 @@ def is_isolated(problem: EquilibriumProblem, z: np.ndarray, p: np.ndarray) -> bo
     chart (charts.py), not a continuum of steady motions (a free heading, a free rigid-body motion)."""
     from mechsys.analysis.equilibrium.charts import singularities
 
-    return not _motions(problem, z, p).size or bool(singularities(problem.model, problem.equilibrium(z).coordinates, p))
+    motions = _motions(problem, z, p)
+    return (not motions.size or bool(singularities(problem.model, problem.equilibrium(z).coordinates, p))
+            or not _continues(problem, z, p, motions))
+
+
+def degenerate_root(problem: EquilibriumProblem, z: np.ndarray, p: np.ndarray) -> bool:
+    """Whether the root z may be a degenerate root found off by its rounding: along the Jacobian's weakest direction
+    v (smallest singular value s, left vector w, in the unknowns' and equations' own sizes), the point where
+    w^T J v vanishes, z - (s / slope) v, fits the equations as well as z does, to rounding. Newton finds a double
+    root only to ~1e-8 (F ~ c (x - x*)**2), where the stiffness takes the sign of the side it lands on: x = +-2 of
+    F = -x (x**2 - b**2) (x**2 - 4)**2 were 'stable (strict minimum)', where the force pushes away on one side."""
+    rows, sizes = small_scales(problem, p)
+
+    def scaled_J(y: np.ndarray) -> np.ndarray:
+        return problem.J(y, p) / rows[:, None] * sizes
+
+    J = scaled_J(z)
+    if not J.size or J.shape[0] < J.shape[1] or not np.all(np.isfinite(J)):
+        return False
+    U, S, Vt = np.linalg.svd(J)
+    k = problem.nq + len(problem.rate_unknowns)
+    # the weakest direction that moves the coordinates or rates (one in the multipliers alone is a redundant
+    # constraint row: lambda not unique, the rest regular)
+    weakest = next((j for j in range(len(S) - 1, -1, -1) if np.linalg.norm(Vt[j, :k]) >= 1e-3), None)
+    if weakest is None:
+        return False
+    w, v, s = U[:, weakest], Vt[weakest], S[weakest]
+    h = 1e-6 * (1.0 + float(np.linalg.norm(z / sizes)))
+    slope = (w @ scaled_J(z + h * sizes * v) @ v - w @ scaled_J(z - h * sizes * v) @ v) / (2 * h)
+    if not np.isfinite(slope) or slope == 0:
+        return False
+    at = z - (s / slope) * sizes * v
+    F0, Fd = (float(np.max(np.abs(problem.F(y, p) / rows))) for y in (z, at))
+    return bool(np.isfinite(Fd) and Fd <= max(10.0 * F0, 1e-13 * max(1.0, float(np.max(np.abs(J))))))
+
+
+def _continues(problem: EquilibriumProblem, z: np.ndarray, p: np.ndarray, motions: np.ndarray) -> bool:
+    """Whether the roots go on from z along one of its null directions (``motions``): from z moved 1e-3 along it
+    (in the unknowns' own sizes), Newton with that component held finds a root. A double root of an isolated rest
+    does not (V' = x (x - 1)**2 at x = 1: its Jacobian is singular, and it was listed as 'a continuum')."""
+    rows, sizes = small_scales(problem, p)
+    k = motions.shape[1]
+    for b in motions:
+        d = np.zeros(len(z))
+        d[:k] = b
+        d_own = d / sizes
+        d_own /= np.linalg.norm(d_own)
+        y = z + 1e-3 * (1.0 + float(np.linalg.norm(z / sizes))) * sizes * d_own
+        for _ in range(12):
+            F, J = problem.F(y, p), problem.J(y, p)
+            if not (np.all(np.isfinite(F)) and np.all(np.isfinite(J))):
+                break
+            held = np.vstack([J / rows[:, None] * sizes, d_own])
+            step = sizes * np.linalg.lstsq(held, np.concatenate([-F / rows, [0.0]]), rcond=None)[0]
+            y = y + step
+            if np.linalg.norm(step / sizes, np.inf) < 1e-14 * (1 + np.linalg.norm(y / sizes, np.inf)):
+                break
+        if _is_root(problem, y, p):
+            return True
+    return False
 
 
 def _motions(problem: EquilibriumProblem, z: np.ndarray, p: np.ndarray) -> np.ndarray:

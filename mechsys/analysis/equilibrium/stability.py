@@ -237,7 +237,7 @@ def assess(problem: EquilibriumProblem, e: Equilibrium, p: np.ndarray) -> None:
         return
     zero = int(np.sum(zero_like))
     e.stability, e.reason = energy_verdict(problem, e, p, zero)
-    if e.stability == "undecided":
+    if e.stability == "undecided" and not e.reason.endswith((NO_MINIMUM_ALONG, FLAT)):
         e.stability, e.reason = _conservative_linear(problem, e, p, vals, tol, e.stability, e.reason)
 
 
@@ -314,18 +314,24 @@ def energy_verdict(problem: EquilibriumProblem, e: Equilibrium, p: np.ndarray, z
     qn = [problem.model.doc.coords[c] for c in problem.free]
     if problem.m:
         H = _constrained_hessian(problem, e, p, H)
-    h = np.linalg.eigvalsh((H + H.T) / 2) if H.size else np.zeros(0)
-    htol = ZERO_H * max(1.0, float(np.max(np.abs(h)))) if h.size else 0.0
+    h, vectors = np.linalg.eigh((H + H.T) / 2) if H.size else (np.zeros(0), np.zeros((0, 0)))
+    htol = ZERO_H * max(_stiffness_scale(problem, p), float(np.max(np.abs(h)))) if h.size else 0.0
+    flat = np.abs(h) <= htol
     if h.size == 0 or np.min(h) > htol:
-        return "stable", prefix + "energy argument: strict minimum of the effective potential and no energy input " \
-                                  "(Lagrange-Dirichlet): stable; asymptotic stability is not decided by this test"
-    if np.min(h) < -htol:
+        from mechsys.analysis.equilibrium.equilibria import degenerate_root
+
+        if not (h.size and degenerate_root(problem, problem.state(e), p)):
+            return "stable", prefix + "energy argument: strict minimum of the effective potential and no energy " \
+                                      "input (Lagrange-Dirichlet): stable; asymptotic stability is not decided by " \
+                                      "this test"
+        flat[np.argmin(h)] = True  # a degenerate root found off by rounding: its least stiffness is no minimum's
+    elif np.min(h) < -htol:
         if complete:
             return "unstable", prefix + "the effective potential has no minimum and the damping is complete " \
                                         "(Kelvin-Tait-Chetaev)"
         return "undecided", prefix + "the effective potential has no minimum; without complete damping " \
                                      "gyroscopic forces may still stabilize"
-    null = np.linalg.eigh((H + H.T) / 2)[1][:, np.abs(h) <= htol]
+    null = vectors[:, flat]
     if null.shape[1] == 1 and not problem.m and len(qn) == 1:  # along a line is a proof only in one dimension
         if U is None:
             U, qn = _effective_potential(problem, e)
@@ -337,8 +343,25 @@ def energy_verdict(problem: EquilibriumProblem, e: Equilibrium, p: np.ndarray, z
             if complete:
                 return "unstable", prefix + f"the effective potential has no minimum (order-{order} term along the " \
                                             "degenerate direction) and the damping is complete"
-            return "undecided", prefix + "the effective potential has no minimum along the degenerate direction"
-    return "undecided", prefix + "the potential is flat along some direction (neutral equilibrium or a family)"
+            return "undecided", prefix + NO_MINIMUM_ALONG
+    return "undecided", prefix + FLAT
+
+
+def _stiffness_scale(problem, p: np.ndarray) -> float:
+    """The size of a stiffness in the model's own units: its coordinates' force rows over the coordinates' sizes
+    (small_scales: 1 at ordinary units). Against a floor of 1 N m, a MEMS linkage's stiffness (1e-12) read as flat,
+    and only the spectrum rule called it stable."""
+    from mechsys.analysis.equilibrium.equilibria import small_scales
+
+    if not problem.nq:
+        return 1.0
+    rows, sizes = small_scales(problem, p)
+    return float(np.max(rows[:problem.nq] / sizes[:problem.nq]))
+
+
+#: the energy argument's reasons where a stiffness vanishes: no frequency of the linearization is then a proof
+NO_MINIMUM_ALONG = "the effective potential has no minimum along the degenerate direction"
+FLAT = "the potential is flat along some direction (neutral equilibrium or a family)"
 
 
 def _dissipation(problem, e, p: np.ndarray) -> tuple[bool, bool, str, np.ndarray]:
