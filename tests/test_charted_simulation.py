@@ -431,13 +431,14 @@ def test_a_force_naming_the_angles_keeps_the_file_s_chart(tmp_path):
 def test_a_run_that_switches_charts_starts_on_the_rolling_constraints_and_so_does_its_warm_plan(tmp_path,
                                                                                                monkeypatch):
     """A ball rolling on a plane, its file rates off the rolling rows (der(x) = 1 where r der(a2) = 0.9). The start
-    is the minimum-norm correction: der(x) = 1 - 0.1/1.01 = 0.9009901, and the ball rolls straight at that speed.
-    Spun about y it passes its zyx lock; the run that switched charts wrote the file's rates as its row t = 0
-    (residual 0.1), and its warm plan started the next run from them: x(0.1) = 0.0910891, not 0.0900990."""
+    holds the rates set (--set der(a2) = 9) and corrects the others: der(x) = r der(a2) = 0.9, and the ball rolls
+    straight at that speed (the minimum-norm correction, before set values were held, gave 1 - 0.1/1.01). Spun
+    about y it passes its zyx lock; the run that switched charts wrote the file's rates as its row t = 0 (residual
+    0.1), and its warm plan started the next run from them: x(0.1) = 0.0910891, not 0.0900990."""
     monkeypatch.setenv("MECHSYS_CACHE", str(tmp_path / "cache"))
     path = ROOT / "tests" / "data" / "beyond" / "ball_on_plane.yaml"
     sets = ["--set", "der(y)=0", "--set", "der(a3)=0", "--set", "der(a2)=9"]
-    v = 1 - 0.1 / 1.01
+    v = 0.1 * 9
     for t_end in ("1", "0.1"):
         out = tmp_path / f"run{t_end}.csv"
         r = CliRunner().invoke(app, ["simulate", str(path), *sets, "--t-end", t_end, "--dt", "0.01", "-o", str(out)])

@@ -358,9 +358,10 @@ def test_sweep_runs_collide_tasks(tmp_path):
 
 def test_a_swept_start_off_the_constraints_is_named(tmp_path):
     """A slider-crank swept in its crank angle alone: theta3 and x4 keep the file's values, so the start is off the
-    loop and the assembly moves it (the crank too). The table gives where each run started (start.*, start_moved)
-    and the summary says how many moved; a start on the loop (the file's theta2) moves by round-off only. The
-    assembled start closes the loop: l2O sin(theta2) + l3A sin(theta3) = 0 (the file's geometry)."""
+    loop and the assembly moves it (theta3 and x4; the crank angle swept is held). The table gives where each run
+    started (start.*, start_moved) and the summary says how many moved; a start on the loop (the file's theta2)
+    moves by round-off only. The assembled start closes the loop: l2O sin(theta2) + l3A sin(theta3) = 0 (the
+    file's geometry)."""
     out = tmp_path / "sc.csv"
     r = invoke(SYSTEMS / "slider_crank.yaml", "--param", "theta2=0.785398163397448:1.2:2", "--run", "simulate",
                "--option", "t_end=0.05", "-o", out, "-f", "json")
@@ -375,4 +376,5 @@ def test_a_swept_start_off_the_constraints_is_named(tmp_path):
 
     p = mechsys.load(SYSTEMS / "slider_crank.yaml").parameters
     th2, th3 = float(off["start.theta2"]), float(off["start.theta3"])
+    assert th2 == 1.2
     assert abs(p["l2O"] * math.sin(th2) + p["l3A"] * math.sin(th3)) < 1e-9

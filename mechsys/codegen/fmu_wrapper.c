@@ -52,6 +52,8 @@ typedef struct {
     double time;
     msfmu_parameters p;              /* every parameter; calculated ones follow the others */
     double start[MSFMU_NSTATE];      /* start values of the states that have one */
+    int set[MSFMU_NSTATE];           /* start values set by fmi2SetReal */
+    int held[MSFMU_NSTATE];          /* those and the ones --set gave at export: the assembly holds them */
     double x[MSFMU_NSTATE];          /* the continuous states */
     int initial_ready;               /* before initialization ends: x derived from start and p */
     double a[MSFMU_NCOORD];          /* q'' at (time, x, p) when valid */
@@ -97,6 +99,8 @@ static void msfmu_defaults(msfmu_instance *c) {
     c->p = msfmu_defaults_of_parameters();
     msfmu_calculate_parameters(&c->p);
     memcpy(c->start, msfmu_state_start, sizeof c->start);
+    memset(c->set, 0, sizeof c->set);
+    memcpy(c->held, msfmu_state_held, sizeof c->held);
     memcpy(c->x, msfmu_state_start, sizeof c->x);
     memset(c->a, 0, sizeof c->a);
     memset(c->out, 0, sizeof c->out);
@@ -176,9 +180,17 @@ static double msfmu_residual(const msfmu_instance *c) {
     return worst;
 }
 
-/* Move the state onto the constraints, as `mechsys simulate` does; fmi2Error (and a message saying `when`) if
-   the result still violates them by more than MSFMU_TOLERANCE x (1 + max |x|). */
-static fmi2Status msfmu_project(msfmu_instance *c, const char *when) {
+/* The columns of the rows B (m x n) of the held entries set to zero: a minimum-norm step leaves them */
+static void msfmu_hold(int m, int n, double *B, const int *held) {
+    if (held == NULL) return;
+    for (int i = 0; i < m; i++)
+        for (int k = 0; k < n; k++)
+            if (held[k]) B[i * n + k] = 0.0;
+}
+
+/* project's steps: Gauss-Newton with minimum-norm steps on Phi(q, t) = 0, then the minimum-norm change of u with
+   A u + a_t = 0, moving no state that ``held`` marks (NULL: any); the residual left, and whether A was singular */
+static double msfmu_assemble(msfmu_instance *c, const int *held, int *singular) {
     double *q = c->x, *u = c->x + MSFMU_NCOORD;
     double A[MSFMU_NROWS * MSFMU_NCOORD], r[MSFMU_NROWS];
 #if MSFMU_NHOL > 0
@@ -189,14 +201,23 @@ static fmi2Status msfmu_project(msfmu_instance *c, const char *when) {
         msfmu_constraint_matrix(c->time, q, u, &c->p, A);
         for (int i = 0; i < MSFMU_NHOL; i++)
             memcpy(H + i * MSFMU_NCOORD, A + msfmu_holonomic_row[i] * MSFMU_NCOORD, sizeof(double) * MSFMU_NCOORD);
+        msfmu_hold(MSFMU_NHOL, MSFMU_NCOORD, H, held);
         if (msfmu_min_norm_step(MSFMU_NHOL, MSFMU_NCOORD, H, phi, q)) break;
     }
 #endif
     msfmu_constraint_matrix(c->time, q, u, &c->p, A);
     msfmu_constraint_velocity(c->time, q, u, &c->p, r);
-    int singular = msfmu_min_norm_step(MSFMU_NROWS, MSFMU_NCOORD, A, r, u);
+    msfmu_hold(MSFMU_NROWS, MSFMU_NCOORD, A, held == NULL ? NULL : held + MSFMU_NCOORD);
+    *singular = msfmu_min_norm_step(MSFMU_NROWS, MSFMU_NCOORD, A, r, u);
     c->valid = 0;
-    double residual = msfmu_residual(c);
+    return msfmu_residual(c);
+}
+
+/* Move the state onto the constraints, as `mechsys simulate` does; fmi2Error (and a message saying `when`) if
+   the result still violates them by more than MSFMU_TOLERANCE x (1 + max |x|). */
+static fmi2Status msfmu_project(msfmu_instance *c, const char *when) {
+    int singular;
+    double residual = msfmu_assemble(c, NULL, &singular);
     double tolerance = MSFMU_TOLERANCE * (1.0 + msfmu_max_abs(c->x, MSFMU_NSTATE));
     if (residual <= tolerance) return fmi2OK;
     msfmu_log(c, fmi2Error, "logStatusError", "%s: the constraint residual is %.3g at t = %.17g (tolerance %.3g); "
@@ -217,13 +238,27 @@ static double msfmu_drift_limit(const msfmu_instance *c) {
    value is computed from the parameters), assembled onto the constraints if there are any. */
 static fmi2Status msfmu_initial_state(msfmu_instance *c) {
     if (c->initial_ready) return fmi2OK;
-    memcpy(c->x, c->start, sizeof c->x);
+    /* the start values set, the file's values (with --set's, before assembly) for the others: `mechsys simulate
+       --set` starts from the same state (the defaults, already assembled, gave another start: a crank set to 0.6
+       started at 0.476 here and at 0.396 there) */
+    for (int i = 0; i < MSFMU_NSTATE; i++) c->x[i] = c->set[i] ? c->start[i] : msfmu_state_guess[i];
     msfmu_calculated_states(&c->p, c->x);
     c->valid = 0;
 #if MSFMU_NROWS > 0
-    double given[MSFMU_NSTATE];
-    memcpy(given, c->x, sizeof given);
-    if (msfmu_project(c, "the initial state cannot be assembled onto the constraints") != fmi2OK) return fmi2Error;
+    double raw[MSFMU_NSTATE], given[MSFMU_NSTATE];
+    memcpy(raw, c->x, sizeof raw);
+    int held = 0, singular;
+    for (int i = 0; i < MSFMU_NSTATE; i++) {
+        held |= c->held[i];
+        /* what the importer sees as given: its value, else the declared start (a calculated one: its value) */
+        given[i] = c->set[i] || !msfmu_state_settable[i] ? raw[i] : msfmu_state_start[i];
+    }
+    /* the values set held where the others close the constraints, else all moved (as `mechsys simulate`) */
+    if (!held || !(msfmu_assemble(c, c->held, &singular) <= 1e-12 * (1.0 + msfmu_max_abs(c->x, MSFMU_NSTATE)))) {
+        memcpy(c->x, raw, sizeof raw);
+        if (msfmu_project(c, "the initial state cannot be assembled onto the constraints") != fmi2OK)
+            return fmi2Error;
+    }
     for (int i = 0; i < MSFMU_NSTATE; i++)
         if (fabs(c->x[i] - given[i]) > 1e-9 * (1.0 + fabs(given[i])))
             msfmu_log(c, fmi2Warning, "logStatusWarning", "initial state assembled onto the constraints: %s = %.10g "
@@ -432,6 +467,7 @@ static fmi2Status msfmu_set_start(msfmu_instance *c, fmi2ValueReference r, doubl
         return fmi2Error;
     }
     c->start[k] = value;
+    c->set[k] = c->held[k] = 1;
     c->initial_ready = 0;
     c->valid = 0;
     return fmi2OK;

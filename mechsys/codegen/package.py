@@ -148,6 +148,10 @@ class Package:
     #: parameter name -> why it fixes the structure of this export (a constraint row or a contact that vanishes
     #: at its value and was left out): another value needs another export (`--set`)
     fixed: dict[str, str] = field(default_factory=dict)
+    #: x = [q; u] as the file (and --set) give them, before assembly, and which of them --set gave (held by the
+    #: assembly): the FMU assembles a start from them as `mechsys simulate` does
+    start_guess: list[float] = field(default_factory=list)
+    start_held: list[bool] = field(default_factory=list)
 
     @property
     def n(self) -> int:
@@ -301,6 +305,10 @@ def derive_package(model: "MechanicalModel", method: str = "lagrange") -> Packag
                   coordinates, parameters, rows, {}, inputs, [(n, to_text(e)) for n, e in model.prescribed.items()],
                   _notes(model, moved), __version__)
     pkg.fixed = fixed_parameters(model)
+    from mechsys.analysis.motion.simulate import file_state, held_start
+
+    pkg.start_guess = [float(x) for part in file_state(model) for x in part]
+    pkg.start_held = [bool(x) for part in held_start(model) for x in part]
     n, m = len(model.q), len(rows)
 
     def add(name: str, args: tuple[str, ...], shape: tuple[int, ...], program: Program, summary: str) -> None:

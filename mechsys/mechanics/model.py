@@ -120,14 +120,17 @@ class MechanicalModel:
         doc.parameter_exprs = dict(doc.parameter_exprs)
         doc.initial = dict(doc.initial)
         doc.initial_rate = dict(doc.initial_rate)
+        doc.overridden = dict(doc.overridden)  # (the start values set: the assembly holds them)
         for key, value in values.items():
             m = re.fullmatch(r"der\((\w+)\)", key)
             if m and m.group(1) in doc.initial_rate:
                 doc.initial_rate[m.group(1)] = float(value)
+                doc.overridden[("coordinates", m.group(1), "rate")] = f"{key}={value}"
             elif key in doc.parameter_exprs:
                 doc.parameter_exprs[key] = sp.Float(float(value))
             elif key in doc.initial:
                 doc.initial[key] = float(value)
+                doc.overridden[("coordinates", key, "initial")] = f"{key}={value}"
             else:
                 from mechsys.errors import InputError
 

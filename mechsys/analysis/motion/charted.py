@@ -366,8 +366,7 @@ def simulate_charted(model: MechanicalModel, run_options: SimulationOptions, ove
     otherwise it continues from the last good output row in look-ahead windows, each an ``integrate`` run from
     t = 0 of the model re-derived in the joint's best-conditioned sequence, with its times shifted."""
     from mechsys.analysis.motion.simulate import (CVODE_TIGHTENING, EVALUATIONS_PER_STEP, METHODS, SimulationResult,
-                                                  SlowPace, compile_model, file_state, integrate, output_grid,
-                                                  project)
+                                                  SlowPace, compile_model, integrate, output_grid, start_state)
 
     t_end, dt, max_steps = run_options.t_end, run_options.dt, run_options.max_steps
     joints = watched(model) if run_options.method in METHODS and t_end > 0 else []
@@ -380,7 +379,7 @@ def simulate_charted(model: MechanicalModel, run_options: SimulationOptions, ove
     p = parameter_values(model) if overrides_p is None else overrides_p
     # the start on the constraints, as each run starts (a rolling ball's file rates, off its rolling rows by 0.1,
     # were the first row of a run that switched charts, and the warm plan kept them as its start)
-    q0, u0 = project(compile_model(model), p, 0.0, *file_state(model))
+    q0, u0 = start_state(model, compile_model(model), p)
     user = [j[2] for j in joints]
     first_look = [_look(seq, seq, q0[idx], u0[idx], None, 0.0, options) for _l, _k, seq, idx in joints]
     totals = {"rhs": 0, "steps": 0, "used": 0.0, "seconds": 0.0}

@@ -67,12 +67,13 @@ def inverse_dynamics(model: MechanicalModel, t: float = 0.0) -> Instant:
     from mechsys.numeric.parameters import parameter_values
     from mechsys.analysis.motion.outputs import compile_outputs, deferred_values
     from mechsys.analysis.motion.reactions import reaction_notes, wrenches
-    from mechsys.analysis.motion.simulate import RightHandSide, check_on_manifold, compile_model, file_state, project
+    from mechsys.analysis.motion.simulate import (RightHandSide, check_on_manifold, compile_model, file_state,
+                                                  project, start_state)
 
     c = compile_model(model)
     p = parameter_values(model)
     guess_q, guess_u = file_state(model)
-    q, u = guess_q, guess_u
+    q, u = start_state(model, c, p)  # (the values the user set held)
     for s in _path(c, p, t, guess_q, guess_u):  # follow the assembly along time: the branch the motion is on
         q, u = project(c, p, s, q, u)
         check_on_manifold(c, p, s, q, u)

@@ -423,14 +423,50 @@ def initial_state(model: MechanicalModel) -> tuple[Compiled, np.ndarray, np.ndar
 
     c = compile_model(model)
     p = parameter_values(model)
-    q0, u0 = project(c, p, 0.0, *file_state(model))
+    q0, u0 = start_state(model, c, p)
     return c, p, np.concatenate([q0, u0])
 
 
-def project(c: Compiled, p: np.ndarray, t: float, q: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Closest consistent state: Gauss-Newton on Phi(q, t) = 0 (minimum-norm steps), then A u = -(A u)_t part."""
+def held_start(model: MechanicalModel) -> tuple[np.ndarray, np.ndarray]:
+    """Which initial coordinates and rates the user set (--set, a check's `set:`, a sweep's values): the assembly
+    onto the constraints holds them where it can."""
+    set_ = {(path[1], path[2]) for path in model.doc.overridden if len(path) == 3 and path[0] == "coordinates"}
+    return (np.array([(name, "initial") in set_ for name in model.coordinates], dtype=bool),
+            np.array([(name, "rate") in set_ for name in model.coordinates], dtype=bool))
+
+
+def start_state(model: MechanicalModel, c: Compiled, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The file's initial state assembled onto the constraints at t = 0 (project), holding the coordinates and
+    rates the user set (held_start) where the others can close the constraints: `--set th1=0.6` on a four-bar
+    whose file guesses the coupler started with the crank at 0.396, moved as much as the guesses."""
+    return project(c, p, 0.0, *file_state(model), held=held_start(model))
+
+
+def project(c: Compiled, p: np.ndarray, t: float, q: np.ndarray, u: np.ndarray,
+            held: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Closest consistent state: Gauss-Newton on Phi(q, t) = 0 (minimum-norm steps), then A u = -(A u)_t part.
+    ``held``: coordinates and rates (masks) not to move; where the others cannot satisfy the constraints (a crank
+    angle no loop closes at), all move."""
     if c.m == 0:
         return q, u
+    if held is not None and (np.any(held[0]) or np.any(held[1])):
+        kept = _project(c, p, t, q, u, ~held[0], ~held[1])
+        residual = float(constraint_residual(c, p, np.array([t]), kept[0][None], kept[1][None])[0])
+        if residual <= 1e-12 * (1.0 + float(np.max(np.abs(np.concatenate(kept))))):
+            return kept
+    return _project(c, p, t, q, u, None, None)
+
+
+def _project(c: Compiled, p: np.ndarray, t: float, q: np.ndarray, u: np.ndarray, free_q: np.ndarray | None,
+             free_u: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    """project's steps, moving only the coordinates and rates in ``free_q``, ``free_u`` (None: all)."""
+    def step(B: np.ndarray, r: np.ndarray, free: np.ndarray | None) -> np.ndarray:
+        if free is None:
+            return np.linalg.lstsq(B, r, rcond=None)[0]
+        out = np.zeros(B.shape[1])
+        out[free] = np.linalg.lstsq(B[:, free], r, rcond=None)[0]
+        return out
+
     q = q.copy()
     for _ in range(20):
         phi = c.phi(t, q, u, p).ravel()
@@ -438,10 +474,10 @@ def project(c: Compiled, p: np.ndarray, t: float, q: np.ndarray, u: np.ndarray) 
             break
         A = c.A(t, q, u, p)
         hol = A[: phi.size]
-        q = q - np.linalg.lstsq(hol, phi, rcond=None)[0]
+        q = q - step(hol, phi, free_q)
     A = c.A(t, q, u, p)
     r = c.cv(t, q, u, p).ravel()  # A u + a_t: rheonomic drive constraints have a_t = -p'(t)
-    u = u - np.linalg.lstsq(A, r, rcond=None)[0]
+    u = u - step(A, r, free_u)
     return q, u
 
 
@@ -968,7 +1004,7 @@ def _refuse_singular_chart(c: Compiled, q: np.ndarray) -> None:
 def _start(model: MechanicalModel, c: Compiled, p: np.ndarray) -> tuple[np.ndarray, np.ndarray, list[str]]:
     """The consistent initial state and what the summary should say about it (assembly, conditioning)."""
     guess_q, guess_u = file_state(model)
-    q0, u0 = project(c, p, 0.0, guess_q, guess_u)
+    q0, u0 = start_state(model, c, p)
     check_on_manifold(c, p, 0.0, q0, u0)
     _refuse_singular_chart(c, q0)
     warnings = []
@@ -976,9 +1012,13 @@ def _start(model: MechanicalModel, c: Compiled, p: np.ndarray) -> tuple[np.ndarr
              if abs(qa - qg) > 1e-9 * (1 + abs(qg))]
     moved += [f"der({name}) = {ua:.10g} (given {ug:.10g})" for name, ua, ug in zip(model.coordinates, u0, guess_u)
               if abs(ua - ug) > 1e-9 * (1 + abs(ug))]
+    held_q, held_u = held_start(model)
+    kept = [name for name, h, qa, qg in zip(model.coordinates, held_q, q0, guess_q) if h and qa == qg]
+    kept += [f"der({name})" for name, h, ua, ug in zip(model.coordinates, held_u, u0, guess_u) if h and ua == ug]
     if moved:
         warnings.append("initial state assembled onto the constraints by Newton from the file's values (the "
-                        "branch nearest them): " + ", ".join(moved))
+                        "branch nearest them" + (f", holding {', '.join(kept)} as set" if kept else "") + "): "
+                        + ", ".join(moved))
     with np.errstate(all="ignore"):
         M0, f0 = c.eqs.evaluate(0.0, q0, u0, p)
     if not (np.all(np.isfinite(M0)) and np.all(np.isfinite(f0))):
