@@ -268,6 +268,18 @@ def test_equilibrium_matching_and_verdict():
     assert evaluate(near, outputs, "unused.yaml")[0] == "pass"
 
 
+def test_the_default_equilibrium_tolerance_follows_the_size_of_the_rests():
+    """Rests of a MEMS model at x = 1.0e-6 and 1.5e-6 m: an expected rest at 1.2e-6 matched the one at 1.0e-6
+    within the default 1e-6 and passed. The default is 1e-6 times the coordinate's size among the rests found
+    (at most 1): 1e-6 at ordinary units, 1.5e-12 here."""
+    outputs = {"count": 2, "eq1.x": 1.0e-6, "eq1.stability": "stable", "eq2.x": 1.5e-6, "eq2.stability": "unstable"}
+    assert evaluate(expectation(analysis="equilibria", equilibrium={"x": 1.2e-6}), outputs, "u.yaml")[0] == "fail"
+    assert evaluate(expectation(analysis="equilibria", equilibrium={"x": 1.0e-6 + 1e-13}, stability="stable"),
+                    outputs, "u.yaml")[0] == "pass"
+    loose = expectation(analysis="equilibria", equilibrium={"x": 1.2e-6}, tolerance=1e-6)
+    assert evaluate(loose, outputs, "u.yaml")[0] == "pass"  # a tolerance given is the tolerance
+
+
 SPRING_WITH_CLOSED_FORMS = """\
 name: mass on a spring, its closed form in the expectations
 parameters: {m: 2, k: 18, x0: 0.1}

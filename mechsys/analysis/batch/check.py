@@ -195,10 +195,11 @@ def _value_of(e: dict, file: str) -> float:
 
 def _evaluate_equilibrium(e: dict, outputs: dict) -> tuple[str, str, str]:
     count = int(outputs.get("count", 0))
-    tol = float(e.get("tolerance") or 1e-6)
+    tols = {name: float(e["tolerance"]) if e.get("tolerance") else _default_tolerance(name, t, outputs)
+            for name, t in e["equilibrium"].items()}
     for k in range(1, count + 1):
         values = {name: outputs.get(f"eq{k}.{name}") for name in e["equilibrium"]}
-        if all(v is not None and abs(float(v) - float(t)) <= tol for (name, t), v in
+        if all(v is not None and abs(float(v) - float(t)) <= tols[name] for (name, t), v in
                zip(e["equilibrium"].items(), values.values())):
             stability = outputs.get(f"eq{k}.stability")
             measured = ", ".join(f"{n} = {float(v):.10g}" for n, v in values.items()) + f" ({stability})"
@@ -208,6 +209,16 @@ def _evaluate_equilibrium(e: dict, outputs: dict) -> tuple[str, str, str]:
     found = "; ".join(", ".join(f"{n} = {outputs.get(f'eq{k}.{n}')}" for n in e["equilibrium"])
                       for k in range(1, count + 1))
     return "fail", found or "(none)", "no equilibrium within the tolerance"
+
+
+def _default_tolerance(name: str, expected: float, outputs: dict) -> float:
+    """1e-6 times the size of the coordinate among the rests found and the value expected, at most 1: 1e-6 at
+    ordinary units; a MEMS model's rests of 1e-6 m are told apart (an expected 1.2e-6 matched the rest at 1.0e-6,
+    and passed)."""
+    sizes = [abs(float(outputs[f"eq{k}.{name}"])) for k in range(1, int(outputs.get("count", 0)) + 1)
+             if outputs.get(f"eq{k}.{name}") is not None]
+    size = min(1.0, max([abs(float(expected)), *sizes]))
+    return 1e-6 * size if size > 0 else 1e-6
 
 
 def _evaluate_expression(e: dict, measured, file: str) -> tuple[str, str, str]:
