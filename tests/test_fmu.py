@@ -339,7 +339,8 @@ def test_the_closed_loop_matches_mechsys_simulate(fmus, sets):
 
 @needs_fmpy
 @needs_gcc
-@pytest.mark.parametrize("start", [{"th1": 0.6}, {"b": 0.36}, {"th1": 0.6, "der_th1": 3.0}])
+@pytest.mark.parametrize("start", [{"th1": 0.6}, {"b": 0.36}, {"th1": 0.6, "der_th1": 3.0}, {"th1": -1.8},
+                                   {"th3": 2.2}])
 def test_a_start_set_on_a_loop_whose_file_guesses_starts_where_mechsys_simulate_starts(tmp_path, start):
     """A four-bar whose file guesses the coupler and rocker angles (off the loop, as users write them). The FMU
     assembled a changed start from its defaults, already assembled at export, and `mechsys simulate --set` from
@@ -355,8 +356,9 @@ def test_a_start_set_on_a_loop_whose_file_guesses_starts_where_mechsys_simulate_
     result = simulate(mechsys.load(path, overrides=sets), float(TIMES[-1]), dt=float(TIMES[1] - TIMES[0]),
                       method="DOP853", rtol=1e-12, atol=1e-14)
     assert np.max(np.abs(got - np.hstack([result.q, result.u]))) < MATCH
-    if "th1" in start:
-        assert got[0, 0] == 0.6 and result.q[0, 0] == 0.6
+    for k, name in enumerate(("th1", "th2", "th3")):
+        if name in start:
+            assert got[0, k] == start[name] and result.q[0, k] == start[name]
     if "der_th1" in start:
         assert abs(got[0, 3] - 3.0) < 1e-12
     a, b, c, d = 0.1, start.get("b", 0.35), 0.25, 0.3  # the loop: crank tip + coupler = rocker pivot + rocker tip

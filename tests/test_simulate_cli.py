@@ -1,5 +1,6 @@
 """`mechsys simulate`, `bench`, `plot`, `export` from the command line: files, formats, exit codes."""
 import json
+import math
 from pathlib import Path
 
 import numpy as np
@@ -185,26 +186,75 @@ def test_bench_times_no_compilation(tmp_path, monkeypatch):
     assert all(built for _, built in seen), seen
 
 
-def test_a_start_value_set_is_held_by_the_assembly_onto_the_constraints(tmp_path):
+def _four_bar_closures(held: str, value: float) -> list[tuple[float, float, float]]:
+    """The closed positions (th1, th2, th3) of tests/data/beyond/rough_four_bar.yaml (crank a, coupler b, rocker c,
+    ground d) with th1 or th3 = value: the two intersections of the coupler's and the rocker's (or crank's) circles."""
+    a, b, c, d = 0.1, 0.35, 0.25, 0.3
+    if held == "th1":
+        centre1, r1, centre2, r2 = np.array([a * np.cos(value), a * np.sin(value)]), b, np.array([d, 0.0]), c
+    else:
+        centre1, r1, centre2, r2 = np.array([d + c * np.cos(value), c * np.sin(value)]), b, np.zeros(2), a
+    gap = centre2 - centre1
+    L = float(np.hypot(*gap))
+    along = (L * L + r1 * r1 - r2 * r2) / (2 * L)
+    across = math.sqrt(max(r1 * r1 - along * along, 0.0))
+    out = []
+    for sign in (1, -1):
+        point = centre1 + along * gap / L + sign * across * np.array([-gap[1], gap[0]]) / L
+        if held == "th1":
+            A, B, th1 = centre1, point, value
+            th3 = math.atan2(B[1], B[0] - d)
+        else:
+            A, B, th3 = point, centre1, value
+            th1 = math.atan2(A[1], A[0])
+        out.append((th1, math.atan2(B[1] - A[1], B[0] - A[0]) - th1, th3))
+    return out
+
+
+def _nearest(closures, guesses):
+    def dist(x):
+        return sum(abs((v - g + math.pi) % (2 * math.pi) - math.pi) for v, g in zip(x, guesses))
+    return min(closures, key=dist)
+
+
+@pytest.mark.parametrize("held, value", [("th1", 0.6), ("th1", 1.2), ("th1", -1.8), ("th1", 2.1), ("th3", 2.2),
+                                         ("th3", 1.65)])
+def test_a_start_value_set_is_held_by_the_assembly_onto_the_constraints(tmp_path, held, value):
     """A four-bar whose file guesses the coupler and rocker angles (tests/data/beyond/rough_four_bar.yaml). With
-    `--set th1=0.6` the assembly moved the crank too (to 0.396, as much as the guesses): the crank is now held at
-    0.6 and the coupler and rocker close the loop (checked against the loop equations), and the warning names only
-    what moved. A value no loop closes at (a rocker angle beyond its swing) cannot be held: all move, as before,
-    and the warning names it."""
+    `--set th1=0.6` the assembly moved the crank too (to 0.396, as much as the guesses). The value set is now held
+    and the others reach the loop along a path from the guesses: the closed position nearest them (of the two
+    circle intersections, computed here), not another branch (th1 = 1.2 landed on the crossed one) nor angles wound
+    by turns (th1 = -1.8 gave th3 = 52.45); a feasible value is not dropped (th3 = 2.2, near the rocker's swing
+    limit 2.2143, or th1 = 2.1 were moved back). The warning names what moved and what was carried to its value."""
     path = ROOT / "tests" / "data" / "beyond" / "rough_four_bar.yaml"
     out = tmp_path / "run.csv"
-    r = invoke("simulate", path, "--t-end", 0.01, "--set", "th1=0.6", "-o", out, "-f", "json")
+    r = invoke("simulate", path, "--t-end", 0.001, "--dt", 0.001, "--set", f"{held}={value}", "-o", out, "-f", "json")
     assert r.exit_code == 0, r.output
     first = dict(zip(*(line.split(",") for line in out.read_text().splitlines()[:2])))
-    th1, th2, th3 = (float(first[name]) for name in ("th1", "th2", "th3"))
-    assert th1 == 0.6
-    a, b, c, d = 0.1, 0.35, 0.25, 0.3
-    assert abs(a * np.cos(th1) + b * np.cos(th1 + th2) - d - c * np.cos(th3)) < 1e-12
-    assert abs(a * np.sin(th1) + b * np.sin(th1 + th2) - c * np.sin(th3)) < 1e-12
+    got = tuple(float(first[name]) for name in ("th1", "th2", "th3"))
+    assert got[("th1", "th2", "th3").index(held)] == value
+    guesses = {"th1": value, "th2": 0.3, "th3": 1.7} if held == "th1" else {"th1": 1.0, "th2": 0.3, "th3": value}
+    want = _nearest(_four_bar_closures(held, value), list(guesses.values()))
+    assert np.allclose(got, want, atol=1e-10), (got, want)
     warning = next(n for n in json.loads(r.stdout)["notes"] if "assembled onto the constraints" in n)
-    assert "holding th1 as set" in warning and "th2 = " in warning and "th3 = " in warning
-    assert "th1 = " not in warning
-    r = invoke("simulate", path, "--t-end", 0.01, "--set", "th3=3.0", "-o", out, "-f", "json")
+    assert f"carried to {held} as set" in warning and f"{held} = " not in warning
+
+
+def test_a_start_value_no_closed_position_has_is_moved_and_said_so(tmp_path):
+    """The rocker set beyond its swing (th3 = 3.0; it swings over [acos(1/3), acos(-0.6)]) cannot be held: the
+    start is the projection's, and a warning says the value set was not held. Rates set that conflict (der(th1) =
+    der(th3) = 1 with th1 = 0.6) are not held either, while th1 = 0.6 still is."""
+    path = ROOT / "tests" / "data" / "beyond" / "rough_four_bar.yaml"
+    out = tmp_path / "run.csv"
+    r = invoke("simulate", path, "--t-end", 0.001, "--dt", 0.001, "--set", "th3=3.0", "-o", out, "-f", "json")
     assert r.exit_code == 0, r.output
-    warning = next(n for n in json.loads(r.stdout)["notes"] if "assembled onto the constraints" in n)
-    assert "th3 = " in warning and "(guess 3)" in warning
+    notes = json.loads(r.stdout)["notes"]
+    assert any(n.startswith("th3 as set cannot be held on the constraints") for n in notes)
+    r = invoke("simulate", path, "--t-end", 0.001, "--dt", 0.001, "--set", "th1=0.6", "--set", "der(th1)=1",
+               "--set", "der(th3)=1", "-o", out, "-f", "json")
+    assert r.exit_code == 0, r.output
+    first = dict(zip(*(line.split(",") for line in out.read_text().splitlines()[:2])))
+    assert float(first["th1"]) == 0.6
+    notes = json.loads(r.stdout)["notes"]
+    assert any(n.startswith("der(th1), der(th3) as set cannot be held") for n in notes)
+    assert any("carried to th1 as set" in n for n in notes)

@@ -283,6 +283,7 @@ def model_header(layout: FmuLayout, guid: str) -> str:
              _c_array("double", "msfmu_state_start", state_start),
              _c_array("double", "msfmu_state_guess", [repr(x) for x in pkg.start_guess]),
              _c_array("int", "msfmu_state_held", ["1" if x else "0" for x in pkg.start_held]),
+             _c_array("int", "msfmu_coordinate_angle", ["1" if x else "0" for x in pkg.angles]),
              _c_array("int", "msfmu_state_settable", state_settable),
              _c_array("char *const", "msfmu_variable_name", names)]
     if pkg.holonomic_rows:

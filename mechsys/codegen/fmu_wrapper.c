@@ -16,6 +16,7 @@
    minimum-norm steps, then the minimum-norm change of u that satisfies A u + a_t = 0), as `mechsys simulate`
    does between output times. The initial state is assembled the same way at fmi2ExitInitializationMode.
    The model has no event indicators. */
+#include <float.h>
 #include <math.h>
 #include <stdarg.h>
 #include <stddef.h>
@@ -35,6 +36,7 @@
 #define MSFMU_CONVERGED 1e-14      /* Gauss-Newton stops below this residual of Phi (relative, as mechsys) */
 #define MSFMU_TOLERANCE 1e-6       /* a projected state must satisfy the constraints to this (relative) */
 #define MSFMU_ITERATIONS 20
+#define MSFMU_CONTRACTION 0.25    /* a carry step's Newton contracts at once (mechsys: CONTRACTION) */
 
 enum {
     MSFMU_INSTANTIATED = 1, MSFMU_INITIALIZATION = 2, MSFMU_EVENT = 4, MSFMU_CONTINUOUS = 8,
@@ -188,12 +190,11 @@ static void msfmu_hold(int m, int n, double *B, const int *held) {
             if (held[k]) B[i * n + k] = 0.0;
 }
 
-/* project's steps: Gauss-Newton with minimum-norm steps on Phi(q, t) = 0, then the minimum-norm change of u with
-   A u + a_t = 0, moving no state that ``held`` marks (NULL: any); the residual left, and whether A was singular */
-static double msfmu_assemble(msfmu_instance *c, const int *held, int *singular) {
-    double *q = c->x, *u = c->x + MSFMU_NCOORD;
-    double A[MSFMU_NROWS * MSFMU_NCOORD], r[MSFMU_NROWS];
+/* Gauss-Newton with minimum-norm steps on Phi(q, t) = 0, moving no coordinate ``held`` marks (NULL: any) */
+static void msfmu_positions(msfmu_instance *c, const int *held) {
 #if MSFMU_NHOL > 0
+    double *q = c->x, *u = c->x + MSFMU_NCOORD;
+    double A[MSFMU_NROWS * MSFMU_NCOORD];
     for (int iteration = 0; iteration < MSFMU_ITERATIONS; iteration++) {
         double phi[MSFMU_NHOL], H[MSFMU_NHOL * MSFMU_NCOORD];
         msfmu_constraint_position(c->time, q, u, &c->p, phi);
@@ -204,20 +205,103 @@ static double msfmu_assemble(msfmu_instance *c, const int *held, int *singular) 
         msfmu_hold(MSFMU_NHOL, MSFMU_NCOORD, H, held);
         if (msfmu_min_norm_step(MSFMU_NHOL, MSFMU_NCOORD, H, phi, q)) break;
     }
+#else
+    (void)c;
+    (void)held;
 #endif
+    c->valid = 0;
+}
+
+/* the minimum-norm change of the rates ``held`` does not mark (NULL: all) with A u + a_t = 0; nonzero if A (its
+   columns not held) is singular */
+static int msfmu_rates(msfmu_instance *c, const int *held) {
+    double *q = c->x, *u = c->x + MSFMU_NCOORD;
+    double A[MSFMU_NROWS * MSFMU_NCOORD], r[MSFMU_NROWS];
     msfmu_constraint_matrix(c->time, q, u, &c->p, A);
     msfmu_constraint_velocity(c->time, q, u, &c->p, r);
-    msfmu_hold(MSFMU_NROWS, MSFMU_NCOORD, A, held == NULL ? NULL : held + MSFMU_NCOORD);
-    *singular = msfmu_min_norm_step(MSFMU_NROWS, MSFMU_NCOORD, A, r, u);
+    msfmu_hold(MSFMU_NROWS, MSFMU_NCOORD, A, held);
+    int singular = msfmu_min_norm_step(MSFMU_NROWS, MSFMU_NCOORD, A, r, u);
     c->valid = 0;
-    return msfmu_residual(c);
+    return singular;
+}
+
+#if MSFMU_NHOL > 0
+/* Gauss-Newton on Phi(q, t) = offset moving no coordinate ``held`` marks (minimum-norm steps): 0 when it converges
+   in 12 steps with its second step at most MSFMU_CONTRACTION of its first (mechsys simulate's _settle) */
+static int msfmu_settle(msfmu_instance *c, const int *held, const double *offset) {
+    double *q = c->x, *u = c->x + MSFMU_NCOORD;
+    double A[MSFMU_NROWS * MSFMU_NCOORD], first = 0.0;
+    for (int iteration = 0; iteration < 12; iteration++) {
+        double phi[MSFMU_NHOL], H[MSFMU_NHOL * MSFMU_NCOORD], before[MSFMU_NCOORD];
+        msfmu_constraint_position(c->time, q, u, &c->p, phi);
+        for (int i = 0; i < MSFMU_NHOL; i++) phi[i] -= offset[i];
+        double size = msfmu_max_abs(phi, MSFMU_NHOL);
+        if (!(size == size) || !(msfmu_max_abs(q, MSFMU_NCOORD) <= DBL_MAX)) return -1;
+        if (size < MSFMU_CONVERGED * (1.0 + msfmu_max_abs(q, MSFMU_NCOORD))) return 0;
+        msfmu_constraint_matrix(c->time, q, u, &c->p, A);
+        for (int i = 0; i < MSFMU_NHOL; i++)
+            memcpy(H + i * MSFMU_NCOORD, A + msfmu_holonomic_row[i] * MSFMU_NCOORD, sizeof(double) * MSFMU_NCOORD);
+        msfmu_hold(MSFMU_NHOL, MSFMU_NCOORD, H, held);
+        memcpy(before, q, sizeof before);
+        if (msfmu_min_norm_step(MSFMU_NHOL, MSFMU_NCOORD, H, phi, q)) return -1;
+        double step = 0.0;
+        for (int k = 0; k < MSFMU_NCOORD; k++)
+            if (fabs(q[k] - before[k]) > step) step = fabs(q[k] - before[k]);
+        if (iteration == 0) first = step;
+        else if (iteration == 1 && step > MSFMU_CONTRACTION * first) return -1;
+    }
+    return -1;
+}
+#endif
+
+/* The coordinates of x with the ``held`` ones of ``guess`` reached from ``origin`` along the homotopy
+   Phi(q) = (1 - s) Phi(origin), the held ones going from origin's to guess's with s (mechsys simulate's carry);
+   0 on success, else x's coordinates are left undefined */
+static int msfmu_carry(msfmu_instance *c, const double *origin, const double *guess, const int *held) {
+#if MSFMU_NHOL > 0
+    double *q = c->x, *u = c->x + MSFMU_NCOORD;
+    double offset[MSFMU_NHOL], scaled[MSFMU_NHOL], previous[MSFMU_NCOORD], velocity[MSFMU_NCOORD];
+    msfmu_constraint_position(c->time, origin, u, &c->p, offset);
+    if (!(msfmu_max_abs(offset, MSFMU_NHOL) <= DBL_MAX)) return -1;
+    memcpy(previous, origin, sizeof previous);
+    memset(velocity, 0, sizeof velocity);
+    double s = 0.0, ds = 1.0;
+    while (s < 1.0) {
+        double step = ds < 1.0 - s ? ds : 1.0 - s;
+        for (int k = 0; k < MSFMU_NCOORD; k++) {
+            q[k] = previous[k] + velocity[k] * step;
+            if (held[k]) q[k] = s + step >= 1.0 ? guess[k] : origin[k] + (s + step) * (guess[k] - origin[k]);
+        }
+        for (int i = 0; i < MSFMU_NHOL; i++) scaled[i] = (1.0 - s - step) * offset[i];
+        if (msfmu_settle(c, held, scaled)) {
+            ds /= 2;
+            if (ds < 1e-6) return -1;
+            continue;
+        }
+        for (int k = 0; k < MSFMU_NCOORD; k++) {
+            velocity[k] = (q[k] - previous[k]) / step;
+            previous[k] = q[k];
+        }
+        s += step;
+        ds = 2 * ds < 1.0 ? 2 * ds : 1.0;
+    }
+    c->valid = 0;
+    return 0;
+#else
+    (void)c;
+    (void)origin;
+    (void)guess;
+    (void)held;
+    return 0;
+#endif
 }
 
 /* Move the state onto the constraints, as `mechsys simulate` does; fmi2Error (and a message saying `when`) if
    the result still violates them by more than MSFMU_TOLERANCE x (1 + max |x|). */
 static fmi2Status msfmu_project(msfmu_instance *c, const char *when) {
-    int singular;
-    double residual = msfmu_assemble(c, NULL, &singular);
+    msfmu_positions(c, NULL);
+    int singular = msfmu_rates(c, NULL);
+    double residual = msfmu_residual(c);
     double tolerance = MSFMU_TOLERANCE * (1.0 + msfmu_max_abs(c->x, MSFMU_NSTATE));
     if (residual <= tolerance) return fmi2OK;
     msfmu_log(c, fmi2Error, "logStatusError", "%s: the constraint residual is %.3g at t = %.17g (tolerance %.3g); "
@@ -245,20 +329,50 @@ static fmi2Status msfmu_initial_state(msfmu_instance *c) {
     msfmu_calculated_states(&c->p, c->x);
     c->valid = 0;
 #if MSFMU_NROWS > 0
-    double raw[MSFMU_NSTATE], given[MSFMU_NSTATE];
+    /* as mechsys simulate's assemble_start: the coordinates set carried to their values (from the guesses, else
+       along the projection's branch), the free angles within half a turn of their guesses; then the rates set held
+       while the others satisfy the velocity rows; a value set that cannot be held is left where projection puts it */
+    double raw[MSFMU_NSTATE], given[MSFMU_NSTATE], projected[MSFMU_NCOORD];
+    int held_q = 0, held_u = 0, dropped = 0;
     memcpy(raw, c->x, sizeof raw);
-    int held = 0, singular;
     for (int i = 0; i < MSFMU_NSTATE; i++) {
-        held |= c->held[i];
+        if (i < MSFMU_NCOORD) held_q |= c->held[i]; else held_u |= c->held[i];
         /* what the importer sees as given: its value, else the declared start (a calculated one: its value) */
         given[i] = c->set[i] || !msfmu_state_settable[i] ? raw[i] : msfmu_state_start[i];
     }
-    /* the values set held where the others close the constraints, else all moved (as `mechsys simulate`) */
-    if (!held || !(msfmu_assemble(c, c->held, &singular) <= 1e-12 * (1.0 + msfmu_max_abs(c->x, MSFMU_NSTATE)))) {
-        memcpy(c->x, raw, sizeof raw);
-        if (msfmu_project(c, "the initial state cannot be assembled onto the constraints") != fmi2OK)
-            return fmi2Error;
+    msfmu_positions(c, NULL);
+    memcpy(projected, c->x, sizeof projected);
+    if (held_q) {
+        int failed = msfmu_carry(c, raw, raw, c->held) && msfmu_carry(c, projected, raw, c->held);
+        if (failed) {
+            memcpy(c->x, projected, sizeof projected);
+            dropped = 1;
+        } else {
+            for (int k = 0; k < MSFMU_NCOORD; k++)
+                if (msfmu_coordinate_angle[k] && !c->held[k])
+                    c->x[k] -= 2 * M_PI * nearbyint((c->x[k] - raw[k]) / (2 * M_PI));
+        }
     }
+    memcpy(c->x + MSFMU_NCOORD, raw + MSFMU_NCOORD, sizeof(double) * MSFMU_NCOORD);
+    if (held_u) {
+        msfmu_rates(c, c->held + MSFMU_NCOORD);
+        if (!(msfmu_residual(c) <= 1e-12 * (1.0 + msfmu_max_abs(c->x, MSFMU_NSTATE)))) {
+            memcpy(c->x + MSFMU_NCOORD, raw + MSFMU_NCOORD, sizeof(double) * MSFMU_NCOORD);
+            msfmu_rates(c, NULL);
+            dropped = 1;
+        }
+    } else {
+        msfmu_rates(c, NULL);
+    }
+    double residual = msfmu_residual(c), tolerance = MSFMU_TOLERANCE * (1.0 + msfmu_max_abs(c->x, MSFMU_NSTATE));
+    if (!(residual <= tolerance)) {
+        msfmu_log(c, fmi2Error, "logStatusError", "the initial state cannot be assembled onto the constraints: the "
+                  "constraint residual is %.3g at t = %.17g (tolerance %.3g)", residual, c->time, tolerance);
+        return fmi2Error;
+    }
+    if (dropped)
+        msfmu_log(c, fmi2Warning, "logStatusWarning", "start values set cannot be held on the constraints (no state "
+                  "on the branch nearest the file's values has them, or the rates set conflict): moved");
     for (int i = 0; i < MSFMU_NSTATE; i++)
         if (fabs(c->x[i] - given[i]) > 1e-9 * (1.0 + fabs(given[i])))
             msfmu_log(c, fmi2Warning, "logStatusWarning", "initial state assembled onto the constraints: %s = %.10g "

@@ -152,6 +152,7 @@ class Package:
     #: assembly): the FMU assembles a start from them as `mechsys simulate` does
     start_guess: list[float] = field(default_factory=list)
     start_held: list[bool] = field(default_factory=list)
+    angles: list[bool] = field(default_factory=list)  # which coordinates are angles (turns of them are one position)
 
     @property
     def n(self) -> int:
@@ -309,6 +310,7 @@ def derive_package(model: "MechanicalModel", method: str = "lagrange") -> Packag
 
     pkg.start_guess = [float(x) for part in file_state(model) for x in part]
     pkg.start_held = [bool(x) for part in held_start(model) for x in part]
+    pkg.angles = [bool(model.angles[name]) for name in model.coordinates]
     n, m = len(model.q), len(rows)
 
     def add(name: str, args: tuple[str, ...], shape: tuple[int, ...], program: Program, summary: str) -> None:

@@ -435,38 +435,132 @@ def held_start(model: MechanicalModel) -> tuple[np.ndarray, np.ndarray]:
             np.array([(name, "rate") in set_ for name in model.coordinates], dtype=bool))
 
 
+@dataclass
+class Start:
+    """The initial state on the constraints, and which values set were held and which could not be."""
+
+    q: np.ndarray
+    u: np.ndarray
+    held: list[str]
+    dropped: list[str]
+
+
 def start_state(model: MechanicalModel, c: Compiled, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The file's initial state assembled onto the constraints at t = 0 (project), holding the coordinates and
-    rates the user set (held_start) where the others can close the constraints: `--set th1=0.6` on a four-bar
-    whose file guesses the coupler started with the crank at 0.396, moved as much as the guesses."""
-    return project(c, p, 0.0, *file_state(model), held=held_start(model))
+    """(q0, u0) of assemble_start."""
+    start = assemble_start(model, c, p)
+    return start.q, start.u
 
 
-def project(c: Compiled, p: np.ndarray, t: float, q: np.ndarray, u: np.ndarray,
-            held: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """Closest consistent state: Gauss-Newton on Phi(q, t) = 0 (minimum-norm steps), then A u = -(A u)_t part.
-    ``held``: coordinates and rates (masks) not to move; where the others cannot satisfy the constraints (a crank
-    angle no loop closes at), all move."""
+def assemble_start(model: MechanicalModel, c: Compiled, p: np.ndarray) -> Start:
+    """The file's initial state assembled onto the constraints at t = 0: project from the file's values (the branch
+    nearest them); with coordinates the user set (held_start), carry instead, which holds them; then the rates set
+    held while the others satisfy the velocity rows. A value set that no state connected to the file's values has
+    (a rocker angle beyond its swing), or rates set that conflict, cannot be held: then the projection's state
+    (Start.dropped). `--set th1=0.6` on a four-bar whose file guesses its coupler started with the crank at 0.396,
+    moved as much as the guesses."""
+    q, u = file_state(model)
+    names = list(model.coordinates)
+    if c.m == 0:
+        return Start(q, u, [], [])
+    hq, hu = held_start(model)
+    held, dropped = [], []
+    projected = project(c, p, 0.0, q, u)[0]
+    carried = None
+    if np.any(hq):
+        # the path from the guesses, else along the projection's branch to the values set
+        carried = carry(c, p, 0.0, q, q, u, hq)
+        carried = carried if carried is not None else carry(c, p, 0.0, projected, q, u, hq)
+        (held if carried is not None else dropped).extend(names[k] for k in np.flatnonzero(hq))
+    if carried is not None:  # the free angles within half a turn of their guesses (the same positions)
+        turns = np.array([model.angles[name] and not h for name, h in zip(names, hq)], dtype=bool)
+        carried[turns] -= 2 * np.pi * np.round((carried[turns] - q[turns]) / (2 * np.pi))
+    q = carried if carried is not None else projected
+    if np.any(hu):
+        u_h = _rates(c, p, 0.0, q, u, ~hu)
+        chosen = [f"der({names[k]})" for k in np.flatnonzero(hu)]
+        if _residual(c, p, 0.0, q, u_h) <= 1e-12 * (1.0 + float(np.max(np.abs(np.concatenate([q, u_h]))))):
+            return Start(q, u_h, held + chosen, dropped)
+        dropped += chosen
+    return Start(q, _rates(c, p, 0.0, q, u, None), held, dropped)
+
+
+def carry(c: Compiled, p: np.ndarray, t: float, origin: np.ndarray, guess: np.ndarray, u: np.ndarray,
+          held: np.ndarray) -> np.ndarray | None:
+    """A state on the holonomic constraints with the ``held`` coordinates of ``guess``, reached from ``origin``
+    along a path: the homotopy Phi(q) = (1 - s) Phi(origin), the held coordinates going from origin's to guess's
+    with s, followed from s = 0 (origin itself) to 1 in steps, the free coordinates settled by Gauss-Newton after
+    each; a step is kept only where Newton contracts at once (its second step at most CONTRACTION of its first:
+    inside the path's basin), else halved. From the guesses (origin = guess: the held values fixed, the
+    constraints closing) or from their projection (Phi(origin) = 0: along its branch, the held values moving).
+    A settle straight from the guesses jumped branches (a four-bar's rocker pointing down). None where the steps
+    shrink below 1e-6 of the way: the path meets a singular point (beyond a rocker's swing, a dead centre)."""
+    offset = np.ravel(c.phi(t, origin, u, p))
+    if not np.all(np.isfinite(offset)):
+        return None
+    q, s, ds, velocity = origin.copy(), 0.0, 1.0, np.zeros_like(origin)
+    while s < 1.0:
+        step = min(ds, 1.0 - s)
+        trial = q + velocity * step  # secant predictor along the path
+        trial[held] = guess[held] if s + step >= 1.0 else origin[held] + (s + step) * (guess[held] - origin[held])
+        settled = _settle(c, p, t, trial, u, ~held, (1.0 - s - step) * offset)
+        if settled is None:
+            ds /= 2
+            if ds < 1e-6:
+                return None
+            continue
+        velocity = (settled - q) / step
+        q, s, ds = settled, s + step, min(2 * ds, 1.0)
+    return q
+
+
+#: Newton's second step at most this part of its first: the start of a step is inside the basin of the path
+CONTRACTION = 0.25
+
+
+def _settle(c: Compiled, p: np.ndarray, t: float, q: np.ndarray, u: np.ndarray, free: np.ndarray,
+            offset: np.ndarray) -> np.ndarray | None:
+    """Gauss-Newton on Phi(q, t) = offset moving only the ``free`` coordinates (minimum-norm steps); None when it
+    does not converge in 12 steps or its second step is not CONTRACTION of its first."""
+    q = q.copy()
+    steps: list[float] = []
+    for _ in range(12):
+        r = np.ravel(c.phi(t, q, u, p)) - offset
+        if not np.all(np.isfinite(r)):
+            return None
+        if r.size == 0 or np.max(np.abs(r)) < 1e-14 * (1 + np.max(np.abs(q))):
+            return q
+        hol = c.A(t, q, u, p)[: r.size]
+        dq = np.zeros_like(q)
+        if np.any(free):
+            dq[free] = np.linalg.lstsq(hol[:, free], r, rcond=None)[0]
+        q = q - dq
+        steps.append(float(np.max(np.abs(dq))))
+        if len(steps) == 2 and steps[1] > CONTRACTION * steps[0]:
+            return None
+    return None
+
+
+def _rates(c: Compiled, p: np.ndarray, t: float, q: np.ndarray, u: np.ndarray, free: np.ndarray | None
+           ) -> np.ndarray:
+    """u changed least (minimum norm, in the ``free`` rates only; None: all) so that A u + a_t = 0."""
+    A = c.A(t, q, u, p)
+    r = c.cv(t, q, u, p).ravel()  # A u + a_t: rheonomic drive constraints have a_t = -p'(t)
+    du = np.zeros_like(u)
+    if free is None:
+        du = np.linalg.lstsq(A, r, rcond=None)[0]
+    elif np.any(free):
+        du[free] = np.linalg.lstsq(A[:, free], r, rcond=None)[0]
+    return u - du
+
+
+def _residual(c: Compiled, p: np.ndarray, t: float, q: np.ndarray, u: np.ndarray) -> float:
+    return float(constraint_residual(c, p, np.array([t]), q[None], u[None])[0])
+
+
+def project(c: Compiled, p: np.ndarray, t: float, q: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Closest consistent state: Gauss-Newton on Phi(q, t) = 0 (minimum-norm steps), then A u = -(A u)_t part."""
     if c.m == 0:
         return q, u
-    if held is not None and (np.any(held[0]) or np.any(held[1])):
-        kept = _project(c, p, t, q, u, ~held[0], ~held[1])
-        residual = float(constraint_residual(c, p, np.array([t]), kept[0][None], kept[1][None])[0])
-        if residual <= 1e-12 * (1.0 + float(np.max(np.abs(np.concatenate(kept))))):
-            return kept
-    return _project(c, p, t, q, u, None, None)
-
-
-def _project(c: Compiled, p: np.ndarray, t: float, q: np.ndarray, u: np.ndarray, free_q: np.ndarray | None,
-             free_u: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
-    """project's steps, moving only the coordinates and rates in ``free_q``, ``free_u`` (None: all)."""
-    def step(B: np.ndarray, r: np.ndarray, free: np.ndarray | None) -> np.ndarray:
-        if free is None:
-            return np.linalg.lstsq(B, r, rcond=None)[0]
-        out = np.zeros(B.shape[1])
-        out[free] = np.linalg.lstsq(B[:, free], r, rcond=None)[0]
-        return out
-
     q = q.copy()
     for _ in range(20):
         phi = c.phi(t, q, u, p).ravel()
@@ -474,11 +568,8 @@ def _project(c: Compiled, p: np.ndarray, t: float, q: np.ndarray, u: np.ndarray,
             break
         A = c.A(t, q, u, p)
         hol = A[: phi.size]
-        q = q - step(hol, phi, free_q)
-    A = c.A(t, q, u, p)
-    r = c.cv(t, q, u, p).ravel()  # A u + a_t: rheonomic drive constraints have a_t = -p'(t)
-    u = u - step(A, r, free_u)
-    return q, u
+        q = q - np.linalg.lstsq(hol, phi, rcond=None)[0]
+    return q, _rates(c, p, t, q, u, None)
 
 
 def nonconservative_work(c: Compiled, p: np.ndarray, grid: np.ndarray, q: np.ndarray, u: np.ndarray,
@@ -1004,7 +1095,8 @@ def _refuse_singular_chart(c: Compiled, q: np.ndarray) -> None:
 def _start(model: MechanicalModel, c: Compiled, p: np.ndarray) -> tuple[np.ndarray, np.ndarray, list[str]]:
     """The consistent initial state and what the summary should say about it (assembly, conditioning)."""
     guess_q, guess_u = file_state(model)
-    q0, u0 = start_state(model, c, p)
+    start = assemble_start(model, c, p)
+    q0, u0 = start.q, start.u
     check_on_manifold(c, p, 0.0, q0, u0)
     _refuse_singular_chart(c, q0)
     warnings = []
@@ -1012,13 +1104,13 @@ def _start(model: MechanicalModel, c: Compiled, p: np.ndarray) -> tuple[np.ndarr
              if abs(qa - qg) > 1e-9 * (1 + abs(qg))]
     moved += [f"der({name}) = {ua:.10g} (given {ug:.10g})" for name, ua, ug in zip(model.coordinates, u0, guess_u)
               if abs(ua - ug) > 1e-9 * (1 + abs(ug))]
-    held_q, held_u = held_start(model)
-    kept = [name for name, h, qa, qg in zip(model.coordinates, held_q, q0, guess_q) if h and qa == qg]
-    kept += [f"der({name})" for name, h, ua, ug in zip(model.coordinates, held_u, u0, guess_u) if h and ua == ug]
     if moved:
         warnings.append("initial state assembled onto the constraints by Newton from the file's values (the "
-                        "branch nearest them" + (f", holding {', '.join(kept)} as set" if kept else "") + "): "
-                        + ", ".join(moved))
+                        "branch nearest them" + (f", carried to {', '.join(start.held)} as set" if start.held else "")
+                        + "): " + ", ".join(moved))
+    if start.dropped:
+        warnings.append(f"{', '.join(start.dropped)} as set cannot be held on the constraints (no state on the "
+                        "branch nearest the file's values has it, or the rates set conflict): moved as above")
     with np.errstate(all="ignore"):
         M0, f0 = c.eqs.evaluate(0.0, q0, u0, p)
     if not (np.all(np.isfinite(M0)) and np.all(np.isfinite(f0))):
