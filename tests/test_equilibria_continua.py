@@ -121,3 +121,37 @@ def test_a_double_root_where_the_force_keeps_its_sign_is_not_called_stable(tmp_p
     assert all(force(x) < 0 for x in (2 - 1e-3, 2 + 1e-3)) and all(force(x) > 0 for x in (-2 - 1e-3, -2 + 1e-3))
     for x in (0.3, 1.7, 2.4):  # V' = -F (central difference)
         assert (potential(x + 1e-6) - potential(x - 1e-6)) / 2e-6 == pytest.approx(-force(x), rel=1e-7)
+
+
+def test_a_soft_strict_minimum_stays_stable_at_any_size_of_its_stiffness(tmp_path):
+    """V = k x**2/2 + x**3/3 with k = 3e-7: x = 0 is an exact rest and a strict minimum (V'' = k, omega = sqrt(k)),
+    x = -k a maximum. The first degenerate-root test (a floor of 1e-13 on the residual where the stiffness would
+    vanish, F = -k**2/4 = -2.25e-14 there) called x = 0 'undecided' in SI units and 'stable' in grams and mm."""
+    data = _rests(tmp_path, "  - {type: potential, value: 3e-7*x**2/2 + x**3/3}")
+    rows = {round(e["coordinates"]["x"], 12): e for e in data["equilibria"]}
+    assert rows[0.0]["stability"] == "stable" and rows[-3e-7]["stability"] == "unstable"
+    assert max(abs(im) for _, im in rows[0.0]["eigenvalues"]) == pytest.approx(math.sqrt(3e-7), rel=1e-9)
+
+
+def test_a_soft_spring_beside_a_stiff_one_is_stable(tmp_path):
+    """Two masses (m = 1) on springs k1 = 1e10 (to ground) and k2 = 1 (between them), a conservative chain: its rest
+    is stable, omega = 1e5 and 0.99999999995 rad/s (closed form of the 2 x 2 problem). The soft direction is flat
+    against ZERO_H (1e-9 of 1e10), and only the purely oscillatory spectrum decides; the degenerate-root guard had
+    taken that away ('undecided')."""
+    import numpy as np
+
+    text = ("name: chain\nparameters: {k1: 1e10, k2: 1}\ncoordinates:\n  x1: {initial: 0.01, rate: 0}\n"
+            "  x2: {initial: 0.02, rate: 0}\nlinks:\n  a:\n    particle: true\n"
+            "    joint: {type: prismatic, parent: ground, axis: x, coordinate: x1}\n    mass: 1\n  b:\n"
+            "    particle: true\n    joint: {type: prismatic, parent: ground, axis: x, coordinate: x2}\n    mass: 1\n"
+            "forces:\n  - {type: potential, value: k1*x1**2/2 + k2*(x2-x1)**2/2}\n")
+    path = tmp_path / "chain.yaml"
+    path.write_text(text)
+    result = CliRunner().invoke(app, ["equilibria", str(path), "-f", "json"])
+    assert result.exit_code == 0, result.output
+    (rest,) = json.loads(result.output)["equilibria"]
+    assert rest["stability"] == "stable"
+    K = np.array([[1e10 + 1, -1], [-1, 1]])
+    want = np.sqrt(np.linalg.eigvalsh(K))
+    got = sorted(abs(im) for _, im in rest["eigenvalues"] if im > 0)
+    assert got == pytest.approx(sorted(want), rel=1e-6)

@@ -237,7 +237,7 @@ def assess(problem: EquilibriumProblem, e: Equilibrium, p: np.ndarray) -> None:
         return
     zero = int(np.sum(zero_like))
     e.stability, e.reason = energy_verdict(problem, e, p, zero)
-    if e.stability == "undecided" and not e.reason.endswith((NO_MINIMUM_ALONG, FLAT)):
+    if e.stability == "undecided" and not _degenerate(problem, e, p):
         e.stability, e.reason = _conservative_linear(problem, e, p, vals, tol, e.stability, e.reason)
 
 
@@ -359,7 +359,16 @@ def _stiffness_scale(problem, p: np.ndarray) -> float:
     return float(np.max(rows[:problem.nq] / sizes[:problem.nq]))
 
 
-#: the energy argument's reasons where a stiffness vanishes: no frequency of the linearization is then a proof
+def _degenerate(problem, e, p: np.ndarray) -> bool:
+    """The energy argument found a direction without stiffness, and the root is degenerate within its accuracy
+    (degenerate_root): a frequency of the linearization along it is the rounding of a zero one (+-1.6e-6 i at a
+    double root), no proof. A soft direction of a stiff model (k = 1 beside 1e10, flat against ZERO_H) is not."""
+    from mechsys.analysis.equilibrium.equilibria import degenerate_root
+
+    return e.reason.endswith((NO_MINIMUM_ALONG, FLAT)) and degenerate_root(problem, problem.state(e), p)
+
+
+#: the energy argument's reasons where a stiffness vanishes
 NO_MINIMUM_ALONG = "the effective potential has no minimum along the degenerate direction"
 FLAT = "the potential is flat along some direction (neutral equilibrium or a family)"
 
