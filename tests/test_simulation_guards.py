@@ -287,6 +287,20 @@ def test_a_triangle_wave_written_without_a_switching_function_is_refused_at_its_
     assert np.max(np.abs(r.q[:, r.coordinates.index("phi")])) < 1e-9
 
 
+def test_a_triangle_wave_whose_period_is_the_grid_spacing_is_refused_at_its_first_corner(tmp_path):
+    """A 50 Hz triangle wave 0.001*asin(sin(100 pi t)) over 80 s: its period is the scan grid's spacing (80/4000),
+    every sample saw the same phase and the run went on, the pendulum unforced, exit 0 (audit). The grids over the
+    first tenth, hundredth, ... of the run resolve it: refused at its first corner, t = 1/200 s."""
+    path = tmp_path / "fast.yaml"
+    path.write_text(_PENDULUM_UNDER.format(
+        name="cart", coords="  x: {prescribed: \"0.001*asin(sin(100*pi*t))\"}\n  phi: {initial: 0}\n",
+        parent="cart", origin="",
+        links="  cart:\n    joint: {type: prismatic, parent: ground, axis: x, coordinate: x}\n", extra=""))
+    with pytest.raises(AnalysisError, match=r"changes its velocity by a jump near t = 0.005 s \(from 0.314159 to "
+                                            r"-0.314159\)"):
+        simulate(mechsys.load(path, release_prescribed=True), t_end=80.0)
+
+
 def test_fast_smooth_or_steep_prescribed_motions_are_not_taken_for_jumps(tmp_path):
     """The grid scan looks closer where a function changes ten times more than beside: a fast smooth oscillation
     (over 100 s, aliased on the grid) and the docs' smoothed reversal sqrt((t - a)**2 + e**2), whose velocity turns

@@ -86,9 +86,19 @@ def _roots(g: Callable, t_end: float) -> list[float]:
 
 def _suspects(f: Callable, t_end: float) -> list[float]:
     """Where f may jump on [0, t_end], whatever function makes it (asin(sin(w t)), a triangle wave, has no switching
-    function): the grid intervals across which f changes ten times more than across either neighbour (beyond
-    rounding), each narrowed by bisection to the half that changes more, and the grid points where f is not
-    finite. In time order; _jump decides."""
+    function): on grids of GRID points over [0, t_end] and over its first 10**-k (k = 1 .. WINDOWS - 1: a wave
+    faster than the whole grid, or whose period is its spacing, a 50 Hz triangle over 80 s, is resolved near the
+    start, where the first jump is), the intervals across which f changes ten times more than across either
+    neighbour (beyond rounding), each narrowed by bisection to the half that changes more, and the grid points
+    where f is not finite. In time order; _jump decides."""
+    return sorted({t for k in range(WINDOWS) for t in _window(f, t_end * 10.0 ** -k)})
+
+
+#: Grids of _suspects: over [0, t_end] and over its first tenth, hundredth, ...
+WINDOWS = 7
+
+
+def _window(f: Callable, t_end: float) -> list[float]:
     grid = np.linspace(0.0, t_end, GRID)
     values = _values(f, grid)
     finite = np.isfinite(values)
@@ -112,7 +122,7 @@ def _suspects(f: Callable, t_end: float) -> list[float]:
             else:
                 a, fa = mid, fm
         found.append(0.0 if a == 0.0 else 0.5 * (a + b))
-    return sorted(found)
+    return found
 
 
 def _smooth(expr: sp.Expr) -> bool:
@@ -137,7 +147,8 @@ def _jump(f: Callable, tc: float) -> tuple[float, float, float]:
     """(jump, value before, value after) of f at tc, jump 0 when there is none: the difference of its one-sided
     values that does not shrink as they close in (a steep but continuous function's shrinks 1000 times over 1000
     times closer; 100 times closer where the closest values are not finite: the velocity of asin(sin(w t)) divides
-    by its rounding there). At t = 0 the run starts from f(0) itself, so another value just after it is a jump too."""
+    by its rounding there). The values reported are those 1e-6 (1 + |tc|) away: closer, that rounding shows in them.
+    At t = 0 the run starts from f(0) itself, so another value just after it is a jump too."""
     def gap(h: float) -> tuple[float, float, float]:
         before = tc - h if tc - h > 0 else 0.0
         a, b = _values(f, np.array([before, tc + h]))
@@ -146,10 +157,8 @@ def _jump(f: Callable, tc: float) -> tuple[float, float, float]:
 
     h = 1e-6 * max(1.0, abs(tc))
     far, a, b = gap(h)
-    near, a_near, b_near = gap(h * 1e-3)
-    if np.isfinite(near):
-        a, b = a_near, b_near
-    else:  # (the values reported are then those at h: closer, the rounding shows in them)
+    near, _, _ = gap(h * 1e-3)
+    if not np.isfinite(near):
         near, _, _ = gap(h * 1e-2)
     if not (np.isfinite(far) and np.isfinite(near)) or near <= 0.5 * far or near <= 1e-9 * (1.0 + abs(a) + abs(b)):
         return 0.0, a, b
