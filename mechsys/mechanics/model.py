@@ -110,9 +110,11 @@ class MechanicalModel:
         self.events  # parse now: a bad expression is an input error at load time
         self.outputs
 
-    def with_overrides(self, values: dict[str, float]) -> "MechanicalModel":
+    def with_overrides(self, values: dict[str, float], as_set: bool = False) -> "MechanicalModel":
         """The same symbolic model (derivations and compiled code shared) with other numeric parameter values,
-        initial values (``name``) or initial rates (``der(name)``): what a sweep worker reuses between tasks."""
+        initial values (``name``) or initial rates (``der(name)``): what a sweep worker reuses between tasks.
+        ``as_set``: the initial values are the user's, as --set gives them (the start's assembly onto the
+        constraints holds them: a sweep's); not a state the code carries over (a re-charted run's window)."""
         import copy
         import re
 
@@ -120,17 +122,19 @@ class MechanicalModel:
         doc.parameter_exprs = dict(doc.parameter_exprs)
         doc.initial = dict(doc.initial)
         doc.initial_rate = dict(doc.initial_rate)
-        doc.overridden = dict(doc.overridden)  # (the start values set: the assembly holds them)
+        doc.overridden = dict(doc.overridden)
         for key, value in values.items():
             m = re.fullmatch(r"der\((\w+)\)", key)
             if m and m.group(1) in doc.initial_rate:
                 doc.initial_rate[m.group(1)] = float(value)
-                doc.overridden[("coordinates", m.group(1), "rate")] = f"{key}={value}"
+                if as_set:
+                    doc.overridden[("coordinates", m.group(1), "rate")] = f"{key}={value}"
             elif key in doc.parameter_exprs:
                 doc.parameter_exprs[key] = sp.Float(float(value))
             elif key in doc.initial:
                 doc.initial[key] = float(value)
-                doc.overridden[("coordinates", key, "initial")] = f"{key}={value}"
+                if as_set:
+                    doc.overridden[("coordinates", key, "initial")] = f"{key}={value}"
             else:
                 from mechsys.errors import InputError
 

@@ -298,7 +298,7 @@ class _Base:
 
         from mechsys.mechanics.build import negative_moment
 
-        clone = self.model.with_overrides(values)
+        clone = self.model.with_overrides(values, as_set=True)  # (a start value swept is held)
         doc = clone.doc
         subs = {doc.parameters[n]: sp.Float(v) for n, v in doc.parameter_values.items()}
         for label, expr, nonnegative in self.checks:
