@@ -340,7 +340,7 @@ def test_the_closed_loop_matches_mechsys_simulate(fmus, sets):
 @needs_fmpy
 @needs_gcc
 @pytest.mark.parametrize("start", [{"th1": 0.6}, {"b": 0.36}, {"th1": 0.6, "der_th1": 3.0}, {"th1": -1.8},
-                                   {"th3": 2.2}])
+                                   {"th1": -1.5}, {"th3": 2.2}])
 def test_a_start_set_on_a_loop_whose_file_guesses_starts_where_mechsys_simulate_starts(tmp_path, start):
     """A four-bar whose file guesses the coupler and rocker angles (off the loop, as users write them). The FMU
     assembled a changed start from its defaults, already assembled at export, and `mechsys simulate --set` from

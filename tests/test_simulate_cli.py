@@ -217,15 +217,16 @@ def _nearest(closures, guesses):
     return min(closures, key=dist)
 
 
-@pytest.mark.parametrize("held, value", [("th1", 0.6), ("th1", 1.2), ("th1", -1.8), ("th1", 2.1), ("th3", 2.2),
-                                         ("th3", 1.65)])
+@pytest.mark.parametrize("held, value", [("th1", 0.6), ("th1", 1.2), ("th1", -1.8), ("th1", 2.1), ("th1", -1.5),
+                                         ("th3", 2.2), ("th3", 1.65)])
 def test_a_start_value_set_is_held_by_the_assembly_onto_the_constraints(tmp_path, held, value):
     """A four-bar whose file guesses the coupler and rocker angles (tests/data/beyond/rough_four_bar.yaml). With
     `--set th1=0.6` the assembly moved the crank too (to 0.396, as much as the guesses). The value set is now held
     and the others reach the loop along a path from the guesses: the closed position nearest them (of the two
-    circle intersections, computed here), not another branch (th1 = 1.2 landed on the crossed one) nor angles wound
-    by turns (th1 = -1.8 gave th3 = 52.45); a feasible value is not dropped (th3 = 2.2, near the rocker's swing
-    limit 2.2143, or th1 = 2.1 were moved back). The warning names what moved and what was carried to its value."""
+    circle intersections, computed here), not another branch (th1 = 1.2 landed on the crossed one; th1 = -1.5 too,
+    where Newton corrected a step onto it) nor angles wound by turns (th1 = -1.8 gave th3 = 52.45); a feasible
+    value is not dropped (th3 = 2.2, near the rocker's swing limit 2.2143, or th1 = 2.1 were moved back). The
+    warning names what moved and what was carried to its value."""
     path = ROOT / "tests" / "data" / "beyond" / "rough_four_bar.yaml"
     out = tmp_path / "run.csv"
     r = invoke("simulate", path, "--t-end", 0.001, "--dt", 0.001, "--set", f"{held}={value}", "-o", out, "-f", "json")
@@ -250,6 +251,13 @@ def test_a_start_value_no_closed_position_has_is_moved_and_said_so(tmp_path):
     assert r.exit_code == 0, r.output
     notes = json.loads(r.stdout)["notes"]
     assert any(n.startswith("th3 as set cannot be held on the constraints") for n in notes)
+    # the projection's angles within half a turn of their guesses (it wound the rocker by 2 turns: its spring's
+    # energy 81.9 J where the same position stores 7 J)
+    first = dict(zip(*(line.split(",") for line in out.read_text().splitlines()[:2])))
+    th1, th2, th3 = (float(first[name]) for name in ("th1", "th2", "th3"))
+    assert abs(th3 - 3.0) <= math.pi and abs(th2 - 0.3) <= math.pi and abs(th1 - 1.0) <= math.pi
+    a, b, c, d = 0.1, 0.35, 0.25, 0.3
+    assert abs(a * np.cos(th1) + b * np.cos(th1 + th2) - d - c * np.cos(th3)) < 1e-12
     r = invoke("simulate", path, "--t-end", 0.001, "--dt", 0.001, "--set", "th1=0.6", "--set", "der(th1)=1",
                "--set", "der(th3)=1", "-o", out, "-f", "json")
     assert r.exit_code == 0, r.output

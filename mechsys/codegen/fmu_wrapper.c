@@ -37,6 +37,7 @@
 #define MSFMU_TOLERANCE 1e-6       /* a projected state must satisfy the constraints to this (relative) */
 #define MSFMU_ITERATIONS 20
 #define MSFMU_CONTRACTION 0.25    /* a carry step's Newton contracts at once (mechsys: CONTRACTION) */
+#define MSFMU_CORRECTION 0.2      /* and corrects at most this of the tangent's move (mechsys: CORRECTION) */
 
 enum {
     MSFMU_INSTANTIATED = 1, MSFMU_INITIALIZATION = 2, MSFMU_EVENT = 4, MSFMU_CONTINUOUS = 8,
@@ -255,33 +256,54 @@ static int msfmu_settle(msfmu_instance *c, const int *held, const double *offset
 #endif
 
 /* The coordinates of x with the ``held`` ones of ``guess`` reached from ``origin`` along the homotopy
-   Phi(q) = (1 - s) Phi(origin), the held ones going from origin's to guess's with s (mechsys simulate's carry);
-   0 on success, else x's coordinates are left undefined */
+   Phi(q) = (1 - s) Phi(origin), the held ones going from origin's to guess's with s: tangent predictor, Newton
+   corrector, a step kept where Newton contracts at once and corrects by at most MSFMU_CORRECTION of the tangent's
+   move (mechsys simulate's carry); 0 on success, else x's coordinates are left undefined */
 static int msfmu_carry(msfmu_instance *c, const double *origin, const double *guess, const int *held) {
 #if MSFMU_NHOL > 0
     double *q = c->x, *u = c->x + MSFMU_NCOORD;
-    double offset[MSFMU_NHOL], scaled[MSFMU_NHOL], previous[MSFMU_NCOORD], velocity[MSFMU_NCOORD];
+    double offset[MSFMU_NHOL], scaled[MSFMU_NHOL], previous[MSFMU_NCOORD], move[MSFMU_NCOORD];
+    double A[MSFMU_NROWS * MSFMU_NCOORD], H[MSFMU_NHOL * MSFMU_NCOORD], r[MSFMU_NHOL], tangent[MSFMU_NCOORD];
+    double trial[MSFMU_NCOORD];
     msfmu_constraint_position(c->time, origin, u, &c->p, offset);
     if (!(msfmu_max_abs(offset, MSFMU_NHOL) <= DBL_MAX)) return -1;
     memcpy(previous, origin, sizeof previous);
-    memset(velocity, 0, sizeof velocity);
+    for (int k = 0; k < MSFMU_NCOORD; k++) move[k] = held[k] ? guess[k] - origin[k] : 0.0;
     double s = 0.0, ds = 1.0;
     while (s < 1.0) {
         double step = ds < 1.0 - s ? ds : 1.0 - s;
+        /* the tangent: J q' = -Phi(origin), the free part of minimum norm */
+        msfmu_constraint_matrix(c->time, previous, u, &c->p, A);
+        for (int i = 0; i < MSFMU_NHOL; i++) {
+            memcpy(H + i * MSFMU_NCOORD, A + msfmu_holonomic_row[i] * MSFMU_NCOORD, sizeof(double) * MSFMU_NCOORD);
+            double Am = 0.0;
+            for (int k = 0; k < MSFMU_NCOORD; k++) Am += H[i * MSFMU_NCOORD + k] * move[k];
+            r[i] = Am + offset[i];  /* min_norm_step subtracts B^T (B B^T)^-1 r from a zero start */
+        }
+        msfmu_hold(MSFMU_NHOL, MSFMU_NCOORD, H, held);
+        memset(tangent, 0, sizeof tangent);
+        int singular = msfmu_min_norm_step(MSFMU_NHOL, MSFMU_NCOORD, H, r, tangent);
+        double size = msfmu_max_abs(previous, MSFMU_NCOORD), moved = 0.0, corrected = 0.0;
         for (int k = 0; k < MSFMU_NCOORD; k++) {
-            q[k] = previous[k] + velocity[k] * step;
-            if (held[k]) q[k] = s + step >= 1.0 ? guess[k] : origin[k] + (s + step) * (guess[k] - origin[k]);
+            if (held[k]) tangent[k] = move[k];
+            trial[k] = previous[k] + tangent[k] * step;
+            if (held[k]) trial[k] = s + step >= 1.0 ? guess[k] : origin[k] + (s + step) * move[k];
+            q[k] = trial[k];
+            if (fabs(trial[k] - previous[k]) > moved) moved = fabs(trial[k] - previous[k]);
         }
         for (int i = 0; i < MSFMU_NHOL; i++) scaled[i] = (1.0 - s - step) * offset[i];
-        if (msfmu_settle(c, held, scaled)) {
+        int failed = singular || msfmu_settle(c, held, scaled);
+        if (!failed) {
+            for (int k = 0; k < MSFMU_NCOORD; k++)
+                if (fabs(q[k] - trial[k]) > corrected) corrected = fabs(q[k] - trial[k]);
+            failed = corrected > MSFMU_CORRECTION * moved + 1e-14 * (1.0 + size);
+        }
+        if (failed) {
             ds /= 2;
             if (ds < 1e-6) return -1;
             continue;
         }
-        for (int k = 0; k < MSFMU_NCOORD; k++) {
-            velocity[k] = (q[k] - previous[k]) / step;
-            previous[k] = q[k];
-        }
+        memcpy(previous, q, sizeof previous);
         s += step;
         ds = 2 * ds < 1.0 ? 2 * ds : 1.0;
     }
@@ -293,6 +315,28 @@ static int msfmu_carry(msfmu_instance *c, const double *origin, const double *gu
     (void)guess;
     (void)held;
     return 0;
+#endif
+}
+
+/* each angle (not held) within half a turn of its guess, where the constraints hold there as well (mechsys
+   simulate's _unwound) */
+static void msfmu_unwind(msfmu_instance *c, const double *guess, const int *held) {
+#if MSFMU_NHOL > 0
+    double *q = c->x, *u = c->x + MSFMU_NCOORD, phi[MSFMU_NHOL];
+    double tolerance = 1e-12 * (1.0 + msfmu_max_abs(q, MSFMU_NCOORD));
+    for (int k = 0; k < MSFMU_NCOORD; k++) {
+        if (!msfmu_coordinate_angle[k] || (held != NULL && held[k])) continue;
+        double turns = nearbyint((q[k] - guess[k]) / (2 * M_PI)), kept = q[k];
+        if (turns == 0.0) continue;
+        q[k] -= 2 * M_PI * turns;
+        msfmu_constraint_position(c->time, q, u, &c->p, phi);
+        if (!(msfmu_max_abs(phi, MSFMU_NHOL) <= tolerance)) q[k] = kept;
+    }
+    c->valid = 0;
+#else
+    (void)c;
+    (void)guess;
+    (void)held;
 #endif
 }
 
@@ -342,17 +386,11 @@ static fmi2Status msfmu_initial_state(msfmu_instance *c) {
     }
     msfmu_positions(c, NULL);
     memcpy(projected, c->x, sizeof projected);
-    if (held_q) {
-        int failed = msfmu_carry(c, raw, raw, c->held) && msfmu_carry(c, projected, raw, c->held);
-        if (failed) {
-            memcpy(c->x, projected, sizeof projected);
-            dropped = 1;
-        } else {
-            for (int k = 0; k < MSFMU_NCOORD; k++)
-                if (msfmu_coordinate_angle[k] && !c->held[k])
-                    c->x[k] -= 2 * M_PI * nearbyint((c->x[k] - raw[k]) / (2 * M_PI));
-        }
+    if (held_q && msfmu_carry(c, raw, raw, c->held) && msfmu_carry(c, projected, raw, c->held)) {
+        memcpy(c->x, projected, sizeof projected);
+        dropped = 1;
     }
+    msfmu_unwind(c, raw, dropped ? NULL : c->held);
     memcpy(c->x + MSFMU_NCOORD, raw + MSFMU_NCOORD, sizeof(double) * MSFMU_NCOORD);
     if (held_u) {
         msfmu_rates(c, c->held + MSFMU_NCOORD);
