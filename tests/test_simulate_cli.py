@@ -266,3 +266,13 @@ def test_a_start_value_no_closed_position_has_is_moved_and_said_so(tmp_path):
     notes = json.loads(r.stdout)["notes"]
     assert any(n.startswith("der(th1), der(th3) as set cannot be held") for n in notes)
     assert any("carried to th1 as set" in n for n in notes)
+
+
+def test_a_value_set_that_no_path_reaches_is_refused_naming_it(tmp_path):
+    """The rocker set to -1.5: within its swing, but no path from the file's guesses (th1 = 1, th2 = 0.3) reaches a
+    closed position with it, and their projection does not converge. The refusal named no value set ('no nearby
+    state satisfies the constraints'); it now names th3 and what to do."""
+    path = ROOT / "tests" / "data" / "beyond" / "rough_four_bar.yaml"
+    r = invoke("simulate", path, "--t-end", 0.01, "--set", "th3=-1.5")
+    assert r.exit_code == 1
+    assert "th3 as set: no path from the file's values of the other coordinates reaches a state" in r.stderr

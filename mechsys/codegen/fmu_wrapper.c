@@ -402,15 +402,15 @@ static fmi2Status msfmu_initial_state(msfmu_instance *c) {
     } else {
         msfmu_rates(c, NULL);
     }
+    if (dropped)
+        msfmu_log(c, fmi2Warning, "logStatusWarning", "start values set cannot be held on the constraints (no state "
+                  "on the branch nearest the file's values has them, or the rates set conflict): moved");
     double residual = msfmu_residual(c), tolerance = MSFMU_TOLERANCE * (1.0 + msfmu_max_abs(c->x, MSFMU_NSTATE));
     if (!(residual <= tolerance)) {
         msfmu_log(c, fmi2Error, "logStatusError", "the initial state cannot be assembled onto the constraints: the "
                   "constraint residual is %.3g at t = %.17g (tolerance %.3g)", residual, c->time, tolerance);
         return fmi2Error;
     }
-    if (dropped)
-        msfmu_log(c, fmi2Warning, "logStatusWarning", "start values set cannot be held on the constraints (no state "
-                  "on the branch nearest the file's values has them, or the rates set conflict): moved");
     for (int i = 0; i < MSFMU_NSTATE; i++)
         if (fabs(c->x[i] - given[i]) > 1e-9 * (1.0 + fabs(given[i])))
             msfmu_log(c, fmi2Warning, "logStatusWarning", "initial state assembled onto the constraints: %s = %.10g "

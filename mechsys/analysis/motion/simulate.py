@@ -1124,7 +1124,16 @@ def _start(model: MechanicalModel, c: Compiled, p: np.ndarray) -> tuple[np.ndarr
     guess_q, guess_u = file_state(model)
     start = assemble_start(model, c, p)
     q0, u0 = start.q, start.u
-    check_on_manifold(c, p, 0.0, q0, u0)
+    try:
+        check_on_manifold(c, p, 0.0, q0, u0)
+    except AnalysisError as exc:
+        if not start.dropped:
+            raise
+        raise AnalysisError(f"{', '.join(start.dropped)} as set: no path from the file's values of the other "
+                            "coordinates reaches a state on the constraints with it, nor does their projection; "
+                            "write guesses of the others near such a state in the file (values set are held), "
+                            "or check the value; "
+                            f"{exc}") from None
     _refuse_singular_chart(c, q0)
     warnings = []
     moved = [f"{name} = {qa:.10g} (guess {qg:.10g})" for name, qa, qg in zip(model.coordinates, q0, guess_q)
