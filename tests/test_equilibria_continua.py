@@ -155,3 +155,14 @@ def test_a_soft_spring_beside_a_stiff_one_is_stable(tmp_path):
     want = np.sqrt(np.linalg.eigvalsh(K))
     got = sorted(abs(im) for _, im in rest["eigenvalues"] if im > 0)
     assert got == pytest.approx(sorted(want), rel=1e-6)
+
+
+def test_a_cubic_term_decides_however_large_the_sextic_beside_it(tmp_path):
+    """V = x**3/3 + 1e7 x**6: x = 0 is a rest with V'' = 0 and a cubic term, no minimum (V < 0 for small negative x);
+    the other rest x = -(1/6e7)**(1/3) is a strict minimum (V'' = 2x + 3e8 x**4 > 0 there). The higher-order test
+    dropped coefficients below 1e-6 of the largest and called x = 0 'stable (order-6 term positive)'. A
+    coefficient now vanishes only within what the root's inaccuracy makes of the higher ones."""
+    data = _rests(tmp_path, "  - {type: potential, value: x**3/3 + 1e7*x**6}")
+    rows = {round(e["coordinates"]["x"], 9): e["stability"] for e in data["equilibria"]}
+    x_min = round(-(1 / 6e7) ** (1 / 3), 9)
+    assert rows[0.0] in ("undecided", "unstable") and rows[x_min] == "stable", rows

@@ -186,57 +186,55 @@ def test_bench_times_no_compilation(tmp_path, monkeypatch):
     assert all(built for _, built in seen), seen
 
 
-def _four_bar_closures(held: str, value: float) -> list[tuple[float, float, float]]:
-    """The closed positions (th1, th2, th3) of tests/data/beyond/rough_four_bar.yaml (crank a, coupler b, rocker c,
-    ground d) with th1 or th3 = value: the two intersections of the coupler's and the rocker's (or crank's) circles."""
+def _four_bar_path(guess: list[float], held: int, steps: int = 2000) -> np.ndarray:
+    """The end of the homotopy Phi(q) = (1 - s) Phi(guess) of tests/data/beyond/rough_four_bar.yaml (crank a, coupler
+    b, rocker c, ground d) with coordinate ``held`` fixed, followed in ``steps`` equal steps of Newton on the loop
+    equations written here (not mechsys's), its angles wrapped to (-pi, pi]."""
     a, b, c, d = 0.1, 0.35, 0.25, 0.3
-    if held == "th1":
-        centre1, r1, centre2, r2 = np.array([a * np.cos(value), a * np.sin(value)]), b, np.array([d, 0.0]), c
-    else:
-        centre1, r1, centre2, r2 = np.array([d + c * np.cos(value), c * np.sin(value)]), b, np.zeros(2), a
-    gap = centre2 - centre1
-    L = float(np.hypot(*gap))
-    along = (L * L + r1 * r1 - r2 * r2) / (2 * L)
-    across = math.sqrt(max(r1 * r1 - along * along, 0.0))
-    out = []
-    for sign in (1, -1):
-        point = centre1 + along * gap / L + sign * across * np.array([-gap[1], gap[0]]) / L
-        if held == "th1":
-            A, B, th1 = centre1, point, value
-            th3 = math.atan2(B[1], B[0] - d)
-        else:
-            A, B, th3 = point, centre1, value
-            th1 = math.atan2(A[1], A[0])
-        out.append((th1, math.atan2(B[1] - A[1], B[0] - A[0]) - th1, th3))
-    return out
+
+    def phi(q):
+        t1, t2, t3 = q
+        return np.array([a * np.cos(t1) + b * np.cos(t1 + t2) - d - c * np.cos(t3),
+                         a * np.sin(t1) + b * np.sin(t1 + t2) - c * np.sin(t3)])
+
+    def jac(q):
+        t1, t2, t3 = q
+        return np.array([[-a * np.sin(t1) - b * np.sin(t1 + t2), -b * np.sin(t1 + t2), c * np.sin(t3)],
+                         [a * np.cos(t1) + b * np.cos(t1 + t2), b * np.cos(t1 + t2), -c * np.cos(t3)]])
+
+    free = [k for k in range(3) if k != held]
+    q = np.array(guess, dtype=float)
+    offset = phi(q)
+    for i in range(1, steps + 1):
+        for _ in range(4):
+            q[free] -= np.linalg.solve(jac(q)[:, free], phi(q) - (1 - i / steps) * offset)
+    return q
 
 
-def _nearest(closures, guesses):
-    def dist(x):
-        return sum(abs((v - g + math.pi) % (2 * math.pi) - math.pi) for v, g in zip(x, guesses))
-    return min(closures, key=dist)
-
-
-@pytest.mark.parametrize("held, value", [("th1", 0.6), ("th1", 1.2), ("th1", -1.8), ("th1", 2.1), ("th1", -1.5),
+@pytest.mark.parametrize("held, value", [("th1", 0.6), ("th1", 1.2), ("th1", -1.8), ("th1", -1.5), ("th1", 4.8),
                                          ("th3", 2.2), ("th3", 1.65)])
 def test_a_start_value_set_is_held_by_the_assembly_onto_the_constraints(tmp_path, held, value):
     """A four-bar whose file guesses the coupler and rocker angles (tests/data/beyond/rough_four_bar.yaml). With
     `--set th1=0.6` the assembly moved the crank too (to 0.396, as much as the guesses). The value set is now held
-    and the others reach the loop along a path from the guesses: the closed position nearest them (of the two
-    circle intersections, computed here), not another branch (th1 = 1.2 landed on the crossed one; th1 = -1.5 too,
-    where Newton corrected a step onto it) nor angles wound by turns (th1 = -1.8 gave th3 = 52.45); a feasible
-    value is not dropped (th3 = 2.2, near the rocker's swing limit 2.2143, or th1 = 2.1 were moved back). The
-    warning names what moved and what was carried to its value."""
+    and the others follow the homotopy from the guesses: its end, computed here in 2000 small steps, to 1e-9 (the
+    angles up to whole turns). A direct solve jumped to the crossed branch (th1 = 1.2) and wound angles by turns
+    (th1 = -1.8: th3 = 52.45); steps that Newton corrected onto another path (th1 = -1.5, 4.8) did too; a value near
+    the rocker's swing limit (th3 = 2.2 of 2.2143) was moved back. The warning names what moved and what was
+    carried to its value set."""
     path = ROOT / "tests" / "data" / "beyond" / "rough_four_bar.yaml"
     out = tmp_path / "run.csv"
     r = invoke("simulate", path, "--t-end", 0.001, "--dt", 0.001, "--set", f"{held}={value}", "-o", out, "-f", "json")
     assert r.exit_code == 0, r.output
     first = dict(zip(*(line.split(",") for line in out.read_text().splitlines()[:2])))
-    got = tuple(float(first[name]) for name in ("th1", "th2", "th3"))
-    assert got[("th1", "th2", "th3").index(held)] == value
-    guesses = {"th1": value, "th2": 0.3, "th3": 1.7} if held == "th1" else {"th1": 1.0, "th2": 0.3, "th3": value}
-    want = _nearest(_four_bar_closures(held, value), list(guesses.values()))
-    assert np.allclose(got, want, atol=1e-10), (got, want)
+    got = np.array([float(first[name]) for name in ("th1", "th2", "th3")])
+    k = ("th1", "th2", "th3").index(held)
+    assert got[k] == value
+    guess = [1.0, 0.3, 1.7]
+    guess[k] = value
+    want = _four_bar_path(guess, k)
+    turns = np.round((got - want) / (2 * math.pi))
+    assert np.allclose(got - 2 * math.pi * turns, want, atol=1e-9), (got, want)
+    assert np.all(np.abs(np.delete(got - guess, k)) <= math.pi)  # within half a turn of the guesses
     warning = next(n for n in json.loads(r.stdout)["notes"] if "assembled onto the constraints" in n)
     assert f"carried to {held} as set" in warning and f"{held} = " not in warning
 

@@ -38,6 +38,7 @@
 #define MSFMU_ITERATIONS 20
 #define MSFMU_CONTRACTION 0.25    /* a carry step's Newton contracts at once (mechsys: CONTRACTION) */
 #define MSFMU_CORRECTION 0.2      /* and corrects at most this of the tangent's move (mechsys: CORRECTION) */
+#define MSFMU_ANGLE_STEP 0.25     /* and turns no angle by more [rad] (mechsys: ANGLE_STEP) */
 
 enum {
     MSFMU_INSTANTIATED = 1, MSFMU_INITIALIZATION = 2, MSFMU_EVENT = 4, MSFMU_CONTINUOUS = 8,
@@ -257,8 +258,9 @@ static int msfmu_settle(msfmu_instance *c, const int *held, const double *offset
 
 /* The coordinates of x with the ``held`` ones of ``guess`` reached from ``origin`` along the homotopy
    Phi(q) = (1 - s) Phi(origin), the held ones going from origin's to guess's with s: tangent predictor, Newton
-   corrector, a step kept where Newton contracts at once and corrects by at most MSFMU_CORRECTION of the tangent's
-   move (mechsys simulate's carry); 0 on success, else x's coordinates are left undefined */
+   corrector, a step kept where Newton contracts at once, corrects by at most MSFMU_CORRECTION of the tangent's
+   move and turns no angle by more than MSFMU_ANGLE_STEP (mechsys simulate's carry); 0 on success, else x's
+   coordinates are left undefined */
 static int msfmu_carry(msfmu_instance *c, const double *origin, const double *guess, const int *held) {
 #if MSFMU_NHOL > 0
     double *q = c->x, *u = c->x + MSFMU_NCOORD;
@@ -294,9 +296,12 @@ static int msfmu_carry(msfmu_instance *c, const double *origin, const double *gu
         for (int i = 0; i < MSFMU_NHOL; i++) scaled[i] = (1.0 - s - step) * offset[i];
         int failed = singular || msfmu_settle(c, held, scaled);
         if (!failed) {
-            for (int k = 0; k < MSFMU_NCOORD; k++)
+            double turned = 0.0;
+            for (int k = 0; k < MSFMU_NCOORD; k++) {
                 if (fabs(q[k] - trial[k]) > corrected) corrected = fabs(q[k] - trial[k]);
-            failed = corrected > MSFMU_CORRECTION * moved + 1e-14 * (1.0 + size);
+                if (msfmu_coordinate_angle[k] && fabs(q[k] - previous[k]) > turned) turned = fabs(q[k] - previous[k]);
+            }
+            failed = corrected > MSFMU_CORRECTION * moved + 1e-14 * (1.0 + size) || turned > MSFMU_ANGLE_STEP;
         }
         if (failed) {
             ds /= 2;

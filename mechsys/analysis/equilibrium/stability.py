@@ -520,7 +520,11 @@ def _constrained_hessian(problem, e, p: np.ndarray, H: np.ndarray) -> np.ndarray
 
 def _higher_order(U: sp.Expr, qn: list, problem, q0: np.ndarray, p: np.ndarray, v: np.ndarray) -> tuple[int, float]:
     """First non-vanishing derivative (order 3..6) of U along q0 + s v at s = 0; (0, 0.0), undecided, where a
-    derivative is not a finite number (U not smooth there)."""
+    derivative is not a finite number (U not smooth there). A coefficient c_k vanishes when it is within ten times
+    what the root's inaccuracy (DEGENERATE_SHIFT (1 + |q0|), a degenerate root being found ~1e-8 off) makes of the
+    higher ones, sum over j > k of C(j, k) |c_j| shift**(j - k), or of rounding: an x**4 minimum found 1e-8 off has
+    c3 = 4e-8. (Against 1e-6 of the largest, V = x**3/3 + 1e7 x**6 dropped its cubic: 'stable (order-6 term
+    positive)' where V < 0 for small negative x.)"""
     s = sp.Symbol("s_dir", real=True)
     line = U.xreplace({q: float(q0[i]) + float(v[i]) * s for i, q in enumerate(qn)})
     line = line.xreplace({s: sp.Float(float(x)) for s, x in zip(problem.model.parameter_symbols, p)})
@@ -536,7 +540,13 @@ def _higher_order(U: sp.Expr, qn: list, problem, q0: np.ndarray, p: np.ndarray, 
             return 0, 0.0
         terms.append((order, value))
     scale = max(abs(c) for _, c in terms)
-    for order, coeff in terms:
-        if scale > 0 and abs(coeff) > 1e-6 * scale:
+    shift = DEGENERATE_SHIFT * (1.0 + float(np.max(np.abs(q0), initial=0.0)))
+    for k, (order, coeff) in enumerate(terms):
+        noise = sum(math.comb(j, order) * abs(c) * shift ** (j - order) for j, c in terms[k + 1:])
+        if scale > 0 and abs(coeff) > max(10.0 * noise, 1e-12 * scale):
             return order, coeff
     return 0, 0.0
+
+
+#: how far from a degenerate rest the root found may lie, relative to 1 + |q0|: Newton's ~1e-8 (docs §2.5) x 100
+DEGENERATE_SHIFT = 1e-6

@@ -468,8 +468,9 @@ def assemble_start(model: MechanicalModel, c: Compiled, p: np.ndarray) -> Start:
     carried = None
     if np.any(hq):
         # the path from the guesses, else along the projection's branch to the values set
-        carried = carry(c, p, 0.0, q, q, u, hq)
-        carried = carried if carried is not None else carry(c, p, 0.0, projected, q, u, hq)
+        angles = np.array([bool(model.angles[name]) for name in names])
+        carried = carry(c, p, 0.0, q, q, u, hq, angles)
+        carried = carried if carried is not None else carry(c, p, 0.0, projected, q, u, hq, angles)
         (held if carried is not None else dropped).extend(names[k] for k in np.flatnonzero(hq))
     q = _unwound(c, p, carried if carried is not None else projected, q, u,
                  [model.angles[name] and not (h and carried is not None) for name, h in zip(names, hq)])
@@ -483,12 +484,13 @@ def assemble_start(model: MechanicalModel, c: Compiled, p: np.ndarray) -> Start:
 
 
 def carry(c: Compiled, p: np.ndarray, t: float, origin: np.ndarray, guess: np.ndarray, u: np.ndarray,
-          held: np.ndarray) -> np.ndarray | None:
+          held: np.ndarray, angles: np.ndarray) -> np.ndarray | None:
     """A state on the holonomic constraints with the ``held`` coordinates of ``guess``, reached from ``origin``
     along a path: the homotopy Phi(q) = (1 - s) Phi(origin), the held coordinates going from origin's to guess's
     with s, followed from s = 0 (origin itself) to 1 in steps: the tangent predicts (Euler), Gauss-Newton on the
     free coordinates corrects; a step is kept only where Newton contracts at once (its second step at most
-    CONTRACTION of its first) and corrects by at most CORRECTION of what the tangent moved, else halved. From the
+    CONTRACTION of its first), corrects by at most CORRECTION of what the tangent moved and turns no angle by
+    more than ANGLE_STEP, else halved (a crank set to 4.8 had its coupler turned by turns in one step). From the
     guesses (origin = guess: the held values fixed, the constraints closing) or from their projection
     (Phi(origin) = 0: along its branch, the held values moving). A settle straight from the guesses jumped branches
     (a four-bar's rocker pointing down), and so did steps that Newton corrected onto the other branch. None where
@@ -510,7 +512,8 @@ def carry(c: Compiled, p: np.ndarray, t: float, origin: np.ndarray, guess: np.nd
         trial[held] = guess[held] if s + step >= 1.0 else origin[held] + (s + step) * move[held]
         settled = _settle(c, p, t, trial, u, free, (1.0 - s - step) * offset)
         if settled is None or (np.max(np.abs(settled - trial), initial=0.0)
-                               > CORRECTION * np.max(np.abs(trial - q), initial=0.0) + 1e-14 * (1 + np.max(np.abs(q)))):
+                               > CORRECTION * np.max(np.abs(trial - q), initial=0.0) + 1e-14 * (1 + np.max(np.abs(q)))
+                               or np.max(np.abs(settled - q)[angles], initial=0.0) > ANGLE_STEP):
             ds /= 2
             if ds < 1e-6:
                 return None
@@ -521,6 +524,8 @@ def carry(c: Compiled, p: np.ndarray, t: float, origin: np.ndarray, guess: np.nd
 
 #: a step's Newton correction at most this part of the tangent's move: the path, not a neighbouring branch
 CORRECTION = 0.2
+#: no angle turns by more than this [rad] in one step of the path
+ANGLE_STEP = 0.25
 
 
 #: Newton's second step at most this part of its first: the start of a step is inside the basin of the path
@@ -1141,9 +1146,9 @@ def _start(model: MechanicalModel, c: Compiled, p: np.ndarray) -> tuple[np.ndarr
     moved += [f"der({name}) = {ua:.10g} (given {ug:.10g})" for name, ua, ug in zip(model.coordinates, u0, guess_u)
               if abs(ua - ug) > 1e-9 * (1 + abs(ug))]
     if moved:
-        warnings.append("initial state assembled onto the constraints by Newton from the file's values (the "
-                        "branch nearest them" + (f", carried to {', '.join(start.held)} as set" if start.held else "")
-                        + "): " + ", ".join(moved))
+        how = (f"carried to {', '.join(start.held)} as set along a path from the file's values" if start.held else
+               "by Newton from the file's values (the branch nearest them)")
+        warnings.append(f"initial state assembled onto the constraints {how}: " + ", ".join(moved))
     if start.dropped:
         warnings.append(f"{', '.join(start.dropped)} as set cannot be held on the constraints (no state on the "
                         "branch nearest the file's values has it, or the rates set conflict): moved as above")
