@@ -408,8 +408,9 @@ static fmi2Status msfmu_initial_state(msfmu_instance *c) {
         msfmu_rates(c, NULL);
     }
     if (dropped)
-        msfmu_log(c, fmi2Warning, "logStatusWarning", "start values set cannot be held on the constraints (no state "
-                  "on the branch nearest the file's values has them, or the rates set conflict): moved");
+        msfmu_log(c, fmi2Warning, "logStatusWarning", "start values set cannot be held on the constraints (no path "
+                  "from the file's values reaches them, nor the projection's branch, or the rates set conflict): "
+                  "moved");
     double residual = msfmu_residual(c), tolerance = MSFMU_TOLERANCE * (1.0 + msfmu_max_abs(c->x, MSFMU_NSTATE));
     if (!(residual <= tolerance)) {
         msfmu_log(c, fmi2Error, "logStatusError", "the initial state cannot be assembled onto the constraints: the "

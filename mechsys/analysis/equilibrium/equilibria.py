@@ -1120,9 +1120,10 @@ def is_isolated(problem: EquilibriumProblem, z: np.ndarray, p: np.ndarray) -> bo
 
 
 def degenerate_root(problem: EquilibriumProblem, z: np.ndarray, p: np.ndarray) -> bool:
-    """Whether the root z may be a degenerate root found off by its rounding: along the Jacobian's weakest direction
-    v (smallest singular value s, left vector w, in the unknowns' and equations' own sizes), the point where
-    w^T J v vanishes, z - (s / slope) v, fits the equations as well as z does, to rounding. Newton finds a double
+    """Whether the root z may be a degenerate root found off by its accuracy: along the Jacobian's weakest direction
+    that moves the coordinates or rates (v, left vector w, in the unknowns' and equations' own sizes), the point
+    where w^T J v vanishes (three Newton steps along v) fits the equations as well as z does (to 10 times its
+    residual; no floor: a soft spring's exact rest is no double root). Newton finds a double
     root only to ~1e-8 (F ~ c (x - x*)**2), where the stiffness takes the sign of the side it lands on: x = +-2 of
     F = -x (x**2 - b**2) (x**2 - 4)**2 were 'stable (strict minimum)', where the force pushes away on one side."""
     rows, sizes = small_scales(problem, p)

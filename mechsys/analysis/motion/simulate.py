@@ -1150,8 +1150,9 @@ def _start(model: MechanicalModel, c: Compiled, p: np.ndarray) -> tuple[np.ndarr
                "by Newton from the file's values (the branch nearest them)")
         warnings.append(f"initial state assembled onto the constraints {how}: " + ", ".join(moved))
     if start.dropped:
-        warnings.append(f"{', '.join(start.dropped)} as set cannot be held on the constraints (no state on the "
-                        "branch nearest the file's values has it, or the rates set conflict): moved as above")
+        warnings.append(f"{', '.join(start.dropped)} as set cannot be held on the constraints (no path from the "
+                        "file's values reaches it, nor the projection's branch, or the rates set conflict): moved as "
+                        "above")
     with np.errstate(all="ignore"):
         M0, f0 = c.eqs.evaluate(0.0, q0, u0, p)
     if not (np.all(np.isfinite(M0)) and np.all(np.isfinite(f0))):
