@@ -334,7 +334,8 @@ def test_the_closed_loop_matches_mechsys_simulate(fmus, sets):
     assert stepper.get("constraint_residual")[0] < 1e-10
     if "theta2" in sets:  # the crank angle set is held; the others assembled, with a warning naming what moved
         assert abs(got[0, 0] - 1.0) < 1e-12
-        assert any(status == 1 and "assembled onto the constraints: theta3" in text for status, text in stepper.messages)
+        assert any(status == 1 and "assembled onto the constraints: theta3" in text
+                   for status, text in stepper.messages)
 
 
 @needs_fmpy

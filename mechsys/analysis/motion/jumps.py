@@ -171,7 +171,7 @@ def refuse_jumps(model: MechanicalModel, p: np.ndarray, q0: np.ndarray, t_end: f
     wave asin(sin(w t))): an impulse on what it carries, which the integration does not apply (a pendulum on a cart
     prescribed as abs(t - 0.5) stayed at rest where the reversal throws it to -3.6 rad/s). A velocity that only
     kinks (a ramp blended into a constant rate) is fine. Sought where the switching functions change sign and where
-    a grid of GRID points shows a jump (_suspects)."""
+    grids of GRID points over the run and its first tenth, hundredth, ... show a jump (_suspects)."""
     pieces = driven(model)
     if not pieces:
         return

@@ -522,14 +522,12 @@ def carry(c: Compiled, p: np.ndarray, t: float, origin: np.ndarray, guess: np.nd
     return q
 
 
-#: a step's Newton correction at most this part of the tangent's move: the path, not a neighbouring branch
-CORRECTION = 0.2
-#: no angle turns by more than this [rad] in one step of the path
-ANGLE_STEP = 0.25
-
-
-#: Newton's second step at most this part of its first: the start of a step is inside the basin of the path
+#: a step of carry's path is kept where Newton's second step is at most CONTRACTION of its first (inside the
+#: basin of the path), its correction at most CORRECTION of the tangent's move (the path, not a neighbouring
+#: branch), and no angle turns by more than ANGLE_STEP [rad]
 CONTRACTION = 0.25
+CORRECTION = 0.2
+ANGLE_STEP = 0.25
 
 
 def _unwound(c: Compiled, p: np.ndarray, q: np.ndarray, guess: np.ndarray, u: np.ndarray, angles: list[bool]

@@ -43,8 +43,9 @@ class Reference:
 def work_precision(model: MechanicalModel, t_end: float, methods: list[str], rtols: list[float],
                    dt: float | None = None) -> tuple[list[WorkPoint], Reference]:
     """Each (method, rtol) run against a tight reference: DOP853 at rtol 1e-13, or CVODE (else Radau) at 1e-12 where
-    DOP853 cannot finish (a stiff scene); keep t_end inside the predictability horizon of chaotic scenes. Compilation (of the
-    Python code and of the native C library) is done once, before any timing. Returns the points and the reference."""
+    DOP853 cannot finish (a stiff scene); keep t_end inside the predictability horizon of chaotic scenes. Compilation
+    (of the Python code and of the native C library) is done once, before any timing. Returns the points and the
+    reference."""
     from mechsys.errors import AnalysisError
     from mechsys.numeric.native import BUDGET_SPENT
 
